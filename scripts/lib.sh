@@ -1,0 +1,55 @@
+# Shared by scripts/setup, scripts/build, scripts/test and scripts/demo.
+# Source it; it defines FM_ROOT, FM_WS and the fm_* functions.
+set -euo pipefail
+
+FM_ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd -P)
+# Debian's catkin and rospy live under /usr; a pyenv python3 first on PATH
+# cannot import catkin_pkg.
+export PATH="/usr/bin:/bin:/usr/sbin:/sbin:${PATH}"
+FM_CACHE=${FISHEYE_MAPPING_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/fisheye_mapping}
+# One workspace per checkout, so two clones never share build outputs.
+FM_WS="$FM_CACHE/ws-$(printf '%s' "$FM_ROOT" | md5sum | cut -c1-10)"
+export FISHEYE_MAPPING_SHARED_DIR=${FISHEYE_MAPPING_SHARED_DIR:-$(dirname "$FM_ROOT")/shared}
+
+fm_log() { printf '\033[1m[fisheye_mapping]\033[0m %s\n' "$*" >&2; }
+
+# Installs the Debian packages of scripts/debian-packages.txt that are missing.
+fm_setup() {
+  local missing=() pkg
+  while read -r pkg; do
+    [[ -z "$pkg" || "$pkg" == \#* ]] && continue
+    dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")
+  done < "$FM_ROOT/scripts/debian-packages.txt"
+  if ((${#missing[@]} == 0)); then
+    return 0
+  fi
+  fm_log "installing ${#missing[@]} Debian package(s): ${missing[*]}"
+  local sudo=""
+  if [[ $(id -u) -ne 0 ]]; then sudo="sudo"; fi
+  $sudo apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -q --no-install-recommends "${missing[@]}"
+}
+
+# fm_build VARIANT: incremental catkin build in $FM_WS (VARIANT: release | asan).
+fm_build() {
+  local variant=$1 sanitize=OFF
+  [[ "$variant" == asan ]] && sanitize=ON
+  mkdir -p "$FM_WS/src"
+  ln -sfn "$FM_ROOT" "$FM_WS/src/fisheye_mapping"
+  fm_log "building ($variant) in $FM_WS"
+  # ROS's setup scripts read unset variables.
+  set +u
+  catkin_make -C "$FM_WS" --build "$FM_WS/build_$variant" \
+    -DCATKIN_DEVEL_PREFIX="$FM_WS/devel_$variant" \
+    -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+    -DFM_SANITIZE="$sanitize" -DCATKIN_ENABLE_TESTING=ON -j2 "${@:2}"
+  set -u
+}
+
+# fm_source VARIANT: sources the devel space so rosrun/roslaunch find the package.
+fm_source() {
+  set +u
+  # shellcheck disable=SC1090
+  source "$FM_WS/devel_$1/setup.bash"
+  set -u
+}
