@@ -8,8 +8,10 @@ import xml.etree.ElementTree as ET
 
 root = pathlib.Path(sys.argv[1])
 passed, failed, skipped = 0, [], 0
-if len(sys.argv) > 3 and sys.argv[2] == "--runner-failed":
-    failed.append(sys.argv[3])
+args = sys.argv[2:]
+while len(args) >= 2 and args[0] == "--runner-failed":
+    failed.append(args[1])
+    args = args[2:]
 for path in sorted(root.rglob("*.xml")):
     try:
         tree = ET.parse(path)

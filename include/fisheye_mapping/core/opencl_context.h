@@ -9,7 +9,11 @@
 #define CL_HPP_TARGET_OPENCL_VERSION 120
 #define CL_HPP_MINIMUM_OPENCL_VERSION 120
 #define CL_HPP_ENABLE_EXCEPTIONS
+#if __has_include(<CL/opencl.hpp>)
 #include <CL/opencl.hpp>
+#else  // Ubuntu 20.04's opencl-clhpp-headers ships only the older name
+#include <CL/cl2.hpp>
+#endif
 
 #include <map>
 #include <stdexcept>
