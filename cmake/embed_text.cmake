@@ -1,8 +1,9 @@
 # Turns text files into C++ string constants (the way OpenCV's cl2cpp.cmake
 # embeds its kernels). Run as:
-#   cmake -DOUTPUT=<file.cpp> -DINPUTS="<a.h>;<b.cl>" -P embed_text.cmake
+#   cmake -DOUTPUT=<file.cpp> -DINPUTS="<a.h>|<b.cl>" -P embed_text.cmake
 # The generated file defines fisheye_mapping::embeddedClSources(), a table of
 # {basename, text}.
+string(REPLACE "|" ";" INPUTS "${INPUTS}")
 set(body "")
 foreach(input ${INPUTS})
   file(READ "${input}" text)

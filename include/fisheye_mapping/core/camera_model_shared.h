@@ -36,6 +36,7 @@
 #define FM_T_DECL
 #define FM_GLOBAL __global
 #define FM_CAM struct FmCameraT
+#define FM_CAM_FLOAT struct FmCameraT
 #define FM_SQRT(x) sqrt(x)
 #define FM_ATAN2(y, x) atan2(y, x)
 #define FM_SIN(x) sin(x)
@@ -49,6 +50,7 @@ typedef float fm_real;
 #define FM_T_DECL template <typename fm_real>
 #define FM_GLOBAL
 #define FM_CAM FmCameraT<fm_real>
+#define FM_CAM_FLOAT FmCameraT<float> /* for functions that exist in float only */
 #define FM_SQRT(x) std::sqrt(x)
 #define FM_ATAN2(y, x) std::atan2(y, x)
 #define FM_SIN(x) std::sin(x)

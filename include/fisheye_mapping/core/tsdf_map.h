@@ -1,0 +1,140 @@
+// TSDF map of fisheye depth (paper Sec. III-C): voxel blocks of 8^3 voxels in
+// a spatial hash, allocated along each valid pixel's ray within the truncation
+// band, integrated with the fisheye camera model, and kept as a local map: the
+// blocks inside a box around the vehicle are active, the others are swapped out
+// to a store in host memory (or on disk) and swapped back when needed. Nothing
+// fused is lost by swapping.
+//
+// Not thread-safe: call from one thread (integration itself uses all cores).
+#ifndef FISHEYE_MAPPING_CORE_TSDF_MAP_H_
+#define FISHEYE_MAPPING_CORE_TSDF_MAP_H_
+
+#include <array>
+#include <memory>
+#include <string>
+#include <unordered_map>
+#include <unordered_set>
+#include <vector>
+
+#include <Eigen/Geometry>
+#include <opencv2/core.hpp>
+
+#include "fisheye_mapping/core/camera_model.h"
+#include "fisheye_mapping/core/tsdf_shared.h"
+
+namespace fisheye_mapping {
+
+struct TsdfConfig {
+  double voxel_size = 0.05;        // metres
+  double truncation_voxels = 4.0;  // mu = truncation_voxels * voxel_size
+  float max_weight = 100.0f;       // cap of the per-voxel observation count
+  int min_observations = 3;        // outputs keep voxels observed at least this often
+  // Active box around the vehicle (world axes): centre = vehicle + offset.
+  Eigen::Vector3d local_map_size = Eigen::Vector3d(60.0, 60.0, 3.0);
+  Eigen::Vector3d local_map_offset = Eigen::Vector3d(0.0, 0.0, 1.0);
+  std::string swap_directory;  // empty: swapped blocks stay in host memory
+  int threads = 0;             // 0: all cores
+
+  double truncation() const { return truncation_voxels * voxel_size; }
+  double blockSize() const { return FM_BLOCK_SIDE * voxel_size; }
+  // Throws std::invalid_argument naming the field.
+  void validate() const;
+};
+
+using BlockIndex = Eigen::Vector3i;
+
+struct BlockIndexHash {
+  size_t operator()(const BlockIndex& b) const {
+    return (static_cast<size_t>(b.x()) * 73856093u) ^ (static_cast<size_t>(b.y()) * 19349669u) ^
+           (static_cast<size_t>(b.z()) * 83492791u);
+  }
+};
+
+struct VoxelBlock {
+  std::array<FmVoxel, FM_BLOCK_VOXELS> voxels{};  // x fastest: i + 8 j + 64 k
+  static int linear(int i, int j, int k) { return i + FM_BLOCK_SIDE * (j + FM_BLOCK_SIDE * k); }
+};
+
+using BlockSet = std::unordered_set<BlockIndex, BlockIndexHash>;
+
+struct IntegrationStats {
+  size_t valid_pixels = 0;
+  size_t blocks_touched = 0;    // blocks the frame's rays crossed (inside the local box)
+  size_t blocks_allocated = 0;  // new blocks
+  size_t blocks_swapped_in = 0;
+  size_t blocks_swapped_out = 0;
+};
+
+class TsdfMap {
+ public:
+  explicit TsdfMap(const TsdfConfig& config = TsdfConfig());
+  ~TsdfMap();
+
+  const TsdfConfig& config() const { return config_; }
+
+  // Fuses one depth map: CV_32FC1, the camera's resolution, metres of range
+  // along each pixel's ray, NaN (or <= 0, or inf) where invalid. T_W_C is the
+  // camera pose in the world; vehicle_W the vehicle position, which places the
+  // local map (blocks leaving it are swapped out after the update). Throws
+  // std::invalid_argument (map untouched) for a wrong encoding or size, or a
+  // non-finite pose.
+  IntegrationStats integrate(const cv::Mat& depth, const CameraModel& camera,
+                             const Eigen::Isometry3d& T_W_C, const Eigen::Vector3d& vehicle_W);
+
+  // Moves the local map to the vehicle: active blocks outside the new box are
+  // swapped out, stored blocks inside it swapped back in. Returns the number of
+  // blocks swapped out.
+  size_t moveLocalMap(const Eigen::Vector3d& vehicle_W);
+  bool insideLocalMap(const BlockIndex& block) const;
+
+  // Voxel at a global voxel index from either store, or nullptr.
+  const FmVoxel* voxel(const Eigen::Vector3i& global_voxel) const;
+  // Block from either store (a swapped block on disk is read into a cache
+  // owned by the map), or nullptr.
+  const VoxelBlock* block(const BlockIndex& index) const;
+  bool isActive(const BlockIndex& index) const { return active_.count(index) > 0; }
+  // Frees the copies of disk-swapped blocks that block() read.
+  void dropSwapCache() const { disk_cache_.clear(); }
+
+  size_t numActiveBlocks() const { return active_.size(); }
+  size_t numSwappedBlocks() const { return swapped_.size(); }
+  size_t numBlocks() const { return active_.size() + swapped_.size(); }
+  // Memory held by active blocks (the bounded part).
+  size_t activeMemoryBytes() const { return active_.size() * sizeof(VoxelBlock); }
+  std::vector<BlockIndex> allBlocks() const;
+
+  // Blocks whose voxels changed since the last call (for incremental meshing).
+  BlockSet takeChangedBlocks();
+
+  // Whole map (both stores) to a binary file and back, bit-identical. load
+  // replaces the map's contents; the file's voxel size and truncation must
+  // match the config. Throw std::runtime_error naming the file on failure.
+  void save(const std::string& path) const;
+  void load(const std::string& path);
+  void clear();
+
+  Eigen::Vector3d voxelCenter(const Eigen::Vector3i& global_voxel) const {
+    return (global_voxel.cast<double>() + Eigen::Vector3d::Constant(0.5)) * config_.voxel_size;
+  }
+
+ private:
+  struct RayTable;
+  const RayTable& raysFor(const CameraModel& camera);
+  void swapOut(const BlockIndex& index);
+  std::unique_ptr<VoxelBlock> takeSwapped(const BlockIndex& index);
+  std::string swapPath(const BlockIndex& index) const;
+
+  TsdfConfig config_;
+  Eigen::Vector3d local_center_ = Eigen::Vector3d::Zero();
+  bool has_local_center_ = false;
+  std::unordered_map<BlockIndex, std::unique_ptr<VoxelBlock>, BlockIndexHash> active_;
+  // Swapped-out blocks: in memory, or (swap_directory set) nullptr + a file.
+  std::unordered_map<BlockIndex, std::unique_ptr<VoxelBlock>, BlockIndexHash> swapped_;
+  mutable std::unordered_map<BlockIndex, std::unique_ptr<VoxelBlock>, BlockIndexHash> disk_cache_;
+  BlockSet changed_;
+  std::vector<std::unique_ptr<RayTable>> ray_tables_;
+};
+
+}  // namespace fisheye_mapping
+
+#endif  // FISHEYE_MAPPING_CORE_TSDF_MAP_H_

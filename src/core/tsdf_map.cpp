@@ -1,0 +1,379 @@
+#include "fisheye_mapping/core/tsdf_map.h"
+
+#include <omp.h>
+
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <stdexcept>
+
+namespace fisheye_mapping {
+namespace {
+
+constexpr char kMagic[8] = {'F', 'M', 'T', 'S', 'D', 'F', '0', '1'};
+
+int floorDiv(int a, int b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
+
+}  // namespace
+
+void TsdfConfig::validate() const {
+  auto positive = [](const char* name, double v) {
+    if (!(v > 0.0) || !std::isfinite(v)) {
+      std::ostringstream msg;
+      msg << "TsdfConfig." << name << " must be positive, got " << v;
+      throw std::invalid_argument(msg.str());
+    }
+  };
+  positive("voxel_size", voxel_size);
+  positive("truncation_voxels", truncation_voxels);
+  positive("max_weight", max_weight);
+  positive("local_map_size.x", local_map_size.x());
+  positive("local_map_size.y", local_map_size.y());
+  positive("local_map_size.z", local_map_size.z());
+  if (!local_map_offset.allFinite()) throw std::invalid_argument("TsdfConfig.local_map_offset must be finite");
+  if (min_observations < 1) throw std::invalid_argument("TsdfConfig.min_observations must be >= 1");
+  if (threads < 0) throw std::invalid_argument("TsdfConfig.threads must be >= 0");
+}
+
+// Unit rays of every pixel of one camera, computed once (unprojection inverts
+// the distortion by Newton steps, too slow to repeat per frame).
+struct TsdfMap::RayTable {
+  FmCameraT<double> params;
+  std::vector<Eigen::Vector3f> rays;  // NaN where the pixel is outside the model's domain
+};
+
+TsdfMap::TsdfMap(const TsdfConfig& config) : config_(config) {
+  config_.validate();
+  if (!config_.swap_directory.empty()) std::filesystem::create_directories(config_.swap_directory);
+}
+
+TsdfMap::~TsdfMap() = default;
+
+const TsdfMap::RayTable& TsdfMap::raysFor(const CameraModel& camera) {
+  for (const auto& t : ray_tables_) {
+    if (std::memcmp(&t->params, &camera.params(), sizeof(FmCameraT<double>)) == 0) return *t;
+  }
+  auto table = std::make_unique<RayTable>();
+  table->params = camera.params();
+  const int w = camera.width(), h = camera.height();
+  table->rays.resize(static_cast<size_t>(w) * h);
+#pragma omp parallel for schedule(static)
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      Eigen::Vector3d ray;
+      table->rays[static_cast<size_t>(v) * w + u] =
+          camera.unproject(Eigen::Vector2d(u, v), &ray) ? Eigen::Vector3f(ray.cast<float>())
+                                                         : Eigen::Vector3f::Constant(NAN);
+    }
+  }
+  ray_tables_.push_back(std::move(table));
+  return *ray_tables_.back();
+}
+
+bool TsdfMap::insideLocalMap(const BlockIndex& block) const {
+  if (!has_local_center_) return true;
+  const Eigen::Vector3d centre = (block.cast<double>() + Eigen::Vector3d::Constant(0.5)) * config_.blockSize();
+  return ((centre - local_center_).cwiseAbs().array() <= 0.5 * config_.local_map_size.array()).all();
+}
+
+std::string TsdfMap::swapPath(const BlockIndex& b) const {
+  std::ostringstream name;
+  name << config_.swap_directory << "/block_" << b.x() << "_" << b.y() << "_" << b.z() << ".bin";
+  return name.str();
+}
+
+void TsdfMap::swapOut(const BlockIndex& index) {
+  auto it = active_.find(index);
+  if (it == active_.end()) return;
+  std::unique_ptr<VoxelBlock> block = std::move(it->second);
+  active_.erase(it);
+  if (!config_.swap_directory.empty()) {
+    const std::string path = swapPath(index);
+    std::ofstream f(path, std::ios::binary);
+    f.write(reinterpret_cast<const char*>(block->voxels.data()), sizeof(block->voxels));
+    if (!f) throw std::runtime_error(path + ": cannot write swapped block");
+    block.reset();
+  }
+  swapped_[index] = std::move(block);
+}
+
+std::unique_ptr<VoxelBlock> TsdfMap::takeSwapped(const BlockIndex& index) {
+  auto it = swapped_.find(index);
+  if (it == swapped_.end()) return nullptr;
+  std::unique_ptr<VoxelBlock> block = std::move(it->second);
+  swapped_.erase(it);
+  if (!block) {
+    const std::string path = swapPath(index);
+    block = std::make_unique<VoxelBlock>();
+    std::ifstream f(path, std::ios::binary);
+    f.read(reinterpret_cast<char*>(block->voxels.data()), sizeof(block->voxels));
+    if (!f) throw std::runtime_error(path + ": cannot read swapped block");
+    std::filesystem::remove(path);
+    disk_cache_.erase(index);
+  }
+  return block;
+}
+
+size_t TsdfMap::moveLocalMap(const Eigen::Vector3d& vehicle_W) {
+  local_center_ = vehicle_W + config_.local_map_offset;
+  has_local_center_ = true;
+  std::vector<BlockIndex> leaving, returning;
+  for (const auto& kv : active_) {
+    if (!insideLocalMap(kv.first)) leaving.push_back(kv.first);
+  }
+  for (const auto& kv : swapped_) {
+    if (insideLocalMap(kv.first)) returning.push_back(kv.first);
+  }
+  for (const auto& b : leaving) swapOut(b);
+  for (const auto& b : returning) active_[b] = takeSwapped(b);
+  return leaving.size();
+}
+
+IntegrationStats TsdfMap::integrate(const cv::Mat& depth, const CameraModel& camera,
+                                    const Eigen::Isometry3d& T_W_C, const Eigen::Vector3d& vehicle_W) {
+  if (depth.type() != CV_32FC1) {
+    throw std::invalid_argument("depth image must be 32FC1 (metres of range along the ray), got OpenCV type " +
+                                std::to_string(depth.type()));
+  }
+  if (depth.cols != camera.width() || depth.rows != camera.height()) {
+    std::ostringstream msg;
+    msg << "depth image is " << depth.cols << "x" << depth.rows << " but the camera is "
+        << camera.width() << "x" << camera.height();
+    throw std::invalid_argument(msg.str());
+  }
+  if (!T_W_C.matrix().allFinite() || !vehicle_W.allFinite()) {
+    throw std::invalid_argument("camera pose or vehicle position is not finite");
+  }
+  if (config_.threads > 0) omp_set_num_threads(config_.threads);
+
+  IntegrationStats stats;
+  const int nthreads = omp_get_max_threads();
+  local_center_ = vehicle_W + config_.local_map_offset;
+  has_local_center_ = true;
+
+  // 1. Allocation: blocks crossed by each valid ray between d - mu and d + mu.
+  const RayTable& table = raysFor(camera);
+  const cv::Mat depth_c = depth.isContinuous() ? depth : depth.clone();
+  const float* d_ptr = depth_c.ptr<float>();
+  const float mu = static_cast<float>(config_.truncation());
+  const float inv_block = static_cast<float>(1.0 / config_.blockSize());
+  const float step = static_cast<float>(0.5 * config_.blockSize());
+  const int n_steps = static_cast<int>(std::ceil(2.0f * mu / step)) + 1;
+  const Eigen::Matrix3f R = T_W_C.linear().cast<float>();
+  const Eigen::Vector3f t = T_W_C.translation().cast<float>();
+  const int w = camera.width(), h = camera.height();
+  std::vector<std::vector<BlockIndex>> per_thread(nthreads);
+  size_t valid_pixels = 0;
+#pragma omp parallel reduction(+ : valid_pixels)
+  {
+    std::vector<BlockIndex>& out = per_thread[omp_get_thread_num()];
+    // Direct-mapped cache of recently emitted blocks: neighbouring pixels
+    // mostly cross the same blocks.
+    constexpr int kCache = 4096;
+    std::vector<BlockIndex> cache(kCache, BlockIndex(INT32_MIN, INT32_MIN, INT32_MIN));
+#pragma omp for schedule(dynamic, 8)
+    for (int v = 0; v < h; ++v) {
+      for (int u = 0; u < w; ++u) {
+        const size_t i = static_cast<size_t>(v) * w + u;
+        const float d = d_ptr[i];
+        if (!(d > 0.0f) || d > 1e30f) continue;
+        const Eigen::Vector3f& ray = table.rays[i];
+        if (!(ray.z() == ray.z())) continue;
+        ++valid_pixels;
+        const Eigen::Vector3f dir_W = R * ray;
+        const float start = std::max(d - mu, 0.0f);
+        const float length = d + mu - start;
+        for (int s = 0; s < n_steps; ++s) {
+          const float r = start + length * s / (n_steps - 1);
+          const Eigen::Vector3f p = t + r * dir_W;
+          const BlockIndex b((p * inv_block).array().floor().cast<int>());
+          const size_t slot = BlockIndexHash()(b) & (kCache - 1);
+          if (cache[slot] == b) continue;
+          cache[slot] = b;
+          out.push_back(b);
+        }
+      }
+    }
+  }
+  stats.valid_pixels = valid_pixels;
+  BlockSet touched;
+  for (const auto& list : per_thread) {
+    for (const auto& b : list) {
+      if (insideLocalMap(b)) touched.insert(b);
+    }
+  }
+  stats.blocks_touched = touched.size();
+
+  std::vector<std::pair<BlockIndex, VoxelBlock*>> work;
+  work.reserve(touched.size());
+  for (const auto& b : touched) {
+    auto it = active_.find(b);
+    if (it == active_.end()) {
+      std::unique_ptr<VoxelBlock> block = takeSwapped(b);
+      if (block) {
+        ++stats.blocks_swapped_in;
+      } else {
+        block = std::make_unique<VoxelBlock>();
+        ++stats.blocks_allocated;
+      }
+      it = active_.emplace(b, std::move(block)).first;
+    }
+    work.emplace_back(b, it->second.get());
+  }
+
+  // 2. Integration of every voxel of the touched blocks.
+  const FmCameraT<float> cam = camera.floatParams();
+  const Eigen::Isometry3d T_C_W_d = T_W_C.inverse();
+  float T_C_W[12];
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 4; ++c) T_C_W[4 * r + c] = static_cast<float>(T_C_W_d.matrix()(r, c));
+  }
+  const float vs = static_cast<float>(config_.voxel_size);
+  const float max_w = config_.max_weight;
+  std::vector<char> changed(work.size(), 0);
+#pragma omp parallel for schedule(dynamic, 4)
+  for (size_t n = 0; n < work.size(); ++n) {
+    const BlockIndex& b = work[n].first;
+    FmVoxel* voxels = work[n].second->voxels.data();
+    const Eigen::Vector3f origin = (b * FM_BLOCK_SIDE).cast<float>();
+    int any = 0;
+    for (int k = 0; k < FM_BLOCK_SIDE; ++k) {
+      const float pz = (origin.z() + k + 0.5f) * vs;
+      for (int j = 0; j < FM_BLOCK_SIDE; ++j) {
+        const float py = (origin.y() + j + 0.5f) * vs;
+        for (int i = 0; i < FM_BLOCK_SIDE; ++i) {
+          const float px = (origin.x() + i + 0.5f) * vs;
+          any |= fm_tsdf_integrate_voxel(&voxels[VoxelBlock::linear(i, j, k)], px, py, pz, &cam,
+                                         T_C_W, d_ptr, mu, max_w);
+        }
+      }
+    }
+    changed[n] = static_cast<char>(any);
+  }
+  for (size_t n = 0; n < work.size(); ++n) {
+    if (changed[n]) changed_.insert(work[n].first);
+  }
+
+  // 3. Local map: swap out what the vehicle left behind.
+  stats.blocks_swapped_out = moveLocalMap(vehicle_W);
+  return stats;
+}
+
+const VoxelBlock* TsdfMap::block(const BlockIndex& index) const {
+  auto it = active_.find(index);
+  if (it != active_.end()) return it->second.get();
+  auto st = swapped_.find(index);
+  if (st == swapped_.end()) return nullptr;
+  if (st->second) return st->second.get();
+  auto cached = disk_cache_.find(index);
+  if (cached != disk_cache_.end()) return cached->second.get();
+  auto block = std::make_unique<VoxelBlock>();
+  const std::string path = swapPath(index);
+  std::ifstream f(path, std::ios::binary);
+  f.read(reinterpret_cast<char*>(block->voxels.data()), sizeof(block->voxels));
+  if (!f) throw std::runtime_error(path + ": cannot read swapped block");
+  return disk_cache_.emplace(index, std::move(block)).first->second.get();
+}
+
+const FmVoxel* TsdfMap::voxel(const Eigen::Vector3i& g) const {
+  const BlockIndex b(floorDiv(g.x(), FM_BLOCK_SIDE), floorDiv(g.y(), FM_BLOCK_SIDE),
+                     floorDiv(g.z(), FM_BLOCK_SIDE));
+  const VoxelBlock* blk = block(b);
+  if (!blk) return nullptr;
+  const Eigen::Vector3i l = g - b * FM_BLOCK_SIDE;
+  return &blk->voxels[VoxelBlock::linear(l.x(), l.y(), l.z())];
+}
+
+std::vector<BlockIndex> TsdfMap::allBlocks() const {
+  std::vector<BlockIndex> out;
+  out.reserve(numBlocks());
+  for (const auto& kv : active_) out.push_back(kv.first);
+  for (const auto& kv : swapped_) out.push_back(kv.first);
+  return out;
+}
+
+BlockSet TsdfMap::takeChangedBlocks() {
+  BlockSet out;
+  out.swap(changed_);
+  return out;
+}
+
+void TsdfMap::save(const std::string& path) const {
+  const std::string tmp = path + ".tmp";
+  {
+    std::ofstream f(tmp, std::ios::binary);
+    if (!f) throw std::runtime_error(path + ": cannot open for writing");
+    const uint32_t version = 1;
+    const double vs = config_.voxel_size, tr = config_.truncation_voxels;
+    const uint64_t n = numBlocks();
+    f.write(kMagic, sizeof(kMagic));
+    f.write(reinterpret_cast<const char*>(&version), sizeof(version));
+    f.write(reinterpret_cast<const char*>(&vs), sizeof(vs));
+    f.write(reinterpret_cast<const char*>(&tr), sizeof(tr));
+    f.write(reinterpret_cast<const char*>(&n), sizeof(n));
+    for (const BlockIndex& b : allBlocks()) {
+      const int32_t idx[3] = {b.x(), b.y(), b.z()};
+      f.write(reinterpret_cast<const char*>(idx), sizeof(idx));
+      f.write(reinterpret_cast<const char*>(block(b)->voxels.data()), sizeof(VoxelBlock::voxels));
+    }
+    if (!f) throw std::runtime_error(path + ": write failed");
+  }
+  std::filesystem::rename(tmp, path);  // never leave a half-written map behind
+}
+
+void TsdfMap::load(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw std::runtime_error(path + ": cannot open map file");
+  char magic[8];
+  uint32_t version = 0;
+  double vs = 0, tr = 0;
+  uint64_t n = 0;
+  f.read(magic, sizeof(magic));
+  f.read(reinterpret_cast<char*>(&version), sizeof(version));
+  f.read(reinterpret_cast<char*>(&vs), sizeof(vs));
+  f.read(reinterpret_cast<char*>(&tr), sizeof(tr));
+  f.read(reinterpret_cast<char*>(&n), sizeof(n));
+  if (!f || std::memcmp(magic, kMagic, sizeof(kMagic)) != 0 || version != 1) {
+    throw std::runtime_error(path + ": not a fisheye_mapping TSDF map (bad header)");
+  }
+  if (vs != config_.voxel_size || tr != config_.truncation_voxels) {
+    std::ostringstream msg;
+    msg << path << ": map has voxel_size " << vs << " and truncation_voxels " << tr
+        << ", the node is configured with " << config_.voxel_size << " and " << config_.truncation_voxels;
+    throw std::runtime_error(msg.str());
+  }
+  // Read everything before touching the map, so a corrupt file changes nothing.
+  std::unordered_map<BlockIndex, std::unique_ptr<VoxelBlock>, BlockIndexHash> loaded;
+  for (uint64_t i = 0; i < n; ++i) {
+    int32_t idx[3];
+    auto block = std::make_unique<VoxelBlock>();
+    f.read(reinterpret_cast<char*>(idx), sizeof(idx));
+    f.read(reinterpret_cast<char*>(block->voxels.data()), sizeof(VoxelBlock::voxels));
+    if (!f) throw std::runtime_error(path + ": truncated map file (block " + std::to_string(i) + " of " + std::to_string(n) + ")");
+    loaded[BlockIndex(idx[0], idx[1], idx[2])] = std::move(block);
+  }
+  clear();
+  for (auto& kv : loaded) {
+    changed_.insert(kv.first);
+    if (insideLocalMap(kv.first)) {
+      active_[kv.first] = std::move(kv.second);
+    } else {
+      active_[kv.first] = std::move(kv.second);
+      swapOut(kv.first);
+    }
+  }
+}
+
+void TsdfMap::clear() {
+  for (const auto& kv : swapped_) {
+    if (!kv.second) std::filesystem::remove(swapPath(kv.first));
+  }
+  active_.clear();
+  swapped_.clear();
+  disk_cache_.clear();
+  changed_.clear();
+}
+
+}  // namespace fisheye_mapping

@@ -1,0 +1,379 @@
+// TSDF fusion of fisheye depth against analytic scenes (exact signed distance),
+// and the map's bookkeeping: update rule, weight cap, swapping, save / load,
+// bounded active memory, bad input.
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+
+#include <gtest/gtest.h>
+
+#include "analytic_scene.h"
+#include "fisheye_mapping/core/tsdf_map.h"
+#include "fisheye_mapping/core/tsdf_mesher.h"
+#include "test_utils.h"
+
+namespace fisheye_mapping {
+namespace {
+
+using test::lookAt;
+using test::Scene;
+
+// The default rig's fisheye (unified, xi 0.98, radtan) at a quarter of the
+// resolution, to keep the tests fast.
+CameraModel smallFisheye() {
+  return CameraModel::unified(test::makeIntrinsics(130, 130, 127.5, 67.5, 256, 136), 0.98, -0.02,
+                              0.004, 2e-4, -1e-4);
+}
+
+Scene objectsScene() {
+  Scene s;
+  s.ground_extent = 8.0;
+  s.spheres.push_back({Eigen::Vector3d(3.0, 0.9, 0.7), 0.7});
+  s.boxes.push_back({Eigen::Vector3d(2.2, -1.6, 0.0), Eigen::Vector3d(3.6, -0.4, 0.8)});
+  return s;
+}
+
+// 24 views on a circle of radius 4.5 m around the objects, 2.5 m high.
+std::vector<Eigen::Isometry3d> orbit() {
+  std::vector<Eigen::Isometry3d> poses;
+  for (int i = 0; i < 24; ++i) {
+    const double a = 2 * M_PI * i / 24;
+    poses.push_back(lookAt(Eigen::Vector3d(3 + 4.5 * std::cos(a), 4.5 * std::sin(a), 2.5),
+                           Eigen::Vector3d(3, 0, 0.3)));
+  }
+  return poses;
+}
+
+std::string tempDir() {
+  char tmpl[] = "/tmp/fm_tsdf_test_XXXXXX";
+  return mkdtemp(tmpl);
+}
+
+class TsdfFusion : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    config_ = new TsdfConfig();
+    map_ = new TsdfMap(*config_);
+    const CameraModel cam = smallFisheye();
+    const Scene scene = objectsScene();
+    // The vehicle stands on the ground below the camera.
+    for (const auto& T : orbit()) {
+      map_->integrate(scene.render(cam, T), cam, T, Eigen::Vector3d(T.translation().x(), T.translation().y(), 0));
+    }
+  }
+  static void TearDownTestSuite() {
+    delete map_;
+    delete config_;
+  }
+  static TsdfConfig* config_;
+  static TsdfMap* map_;
+};
+TsdfConfig* TsdfFusion::config_ = nullptr;
+TsdfMap* TsdfFusion::map_ = nullptr;
+
+TEST_F(TsdfFusion, TsdfMatchesTheSignedDistanceNearTheSurface) {
+  const Scene scene = objectsScene();
+  const double vs = config_->voxel_size, mu = config_->truncation();
+  double sq = 0, sq_band = 0;
+  size_t n = 0, n_band = 0;
+  for (const BlockIndex& b : map_->allBlocks()) {
+    const VoxelBlock* blk = map_->block(b);
+    for (int k = 0; k < 8; ++k)
+      for (int j = 0; j < 8; ++j)
+        for (int i = 0; i < 8; ++i) {
+          const FmVoxel& v = blk->voxels[VoxelBlock::linear(i, j, k)];
+          if (v.weight < config_->min_observations) continue;
+          const Eigen::Vector3d p = map_->voxelCenter(b * 8 + Eigen::Vector3i(i, j, k));
+          const double truth = scene.sdf(p);
+          if (std::abs(truth) >= mu) continue;
+          const double err = v.tsdf * mu - truth;
+          sq_band += err * err, ++n_band;
+          // Projective distances stretch with the viewing angle away from the
+          // surface; next to it (|sdf| < 1 voxel) they must be right.
+          if (std::abs(truth) < vs) sq += err * err, ++n;
+        }
+  }
+  const double rmse_near = std::sqrt(sq / n), rmse_band = std::sqrt(sq_band / n_band);
+  std::cout << "voxels within 1 voxel of the surface: " << n << ", RMSE " << rmse_near / vs
+            << " voxel; whole truncation band: " << n_band << ", RMSE " << rmse_band / vs << " voxel\n";
+  EXPECT_GT(n, 20000u);
+  EXPECT_LE(rmse_near, 0.5 * vs);
+  EXPECT_LE(rmse_band, 1.0 * vs);
+}
+
+// True where the scene is not smooth: within the truncation distance (4
+// voxels) of a box edge or of the junction of two shapes. Projective distances
+// measured across a crease belong to the other surface, so a TSDF rounds
+// creases off within its truncation band.
+bool nearCrease(const Scene& scene, const Eigen::Vector3d& p, double voxel) {
+  const double vs = 2.0 * voxel;  // 2 * vs = 4 voxels
+  int close = 0;
+  if (scene.ground && std::abs(p.z()) < 2 * vs) ++close;
+  for (const auto& s : scene.spheres) close += std::abs((p - s.c).norm() - s.r) < 2 * vs;
+  for (const auto& b : scene.boxes) {
+    Scene only;
+    only.ground = false;
+    only.boxes.push_back(b);
+    if (std::abs(only.sdf(p)) >= 2 * vs) continue;
+    ++close;
+    int faces = 0;
+    for (int a = 0; a < 3; ++a) faces += std::min(std::abs(p[a] - b.lo[a]), std::abs(p[a] - b.hi[a])) < 2 * vs;
+    if (faces >= 2) return true;
+  }
+  return close >= 2;
+}
+
+TEST_F(TsdfFusion, MeshVerticesLieOnTheTrueSurface) {
+  TsdfMesher mesher(config_->min_observations);
+  mesher.rebuild(*map_);
+  const Scene scene = objectsScene();
+  const double vs = config_->voxel_size;
+  size_t n = 0, far = 0, smooth = 0, smooth_far = 0;
+  double worst_smooth = 0;
+  for (const auto& kv : mesher.blocks()) {
+    for (const auto& v : kv.second.triangles) {
+      const double e = std::abs(scene.sdf(v.cast<double>()));
+      far += e > 0.5 * vs;
+      ++n;
+      if (!nearCrease(scene, v.cast<double>(), vs)) {
+        ++smooth;
+        smooth_far += e > 0.5 * vs;
+        worst_smooth = std::max(worst_smooth, e);
+      }
+    }
+  }
+  std::cout << n / 3 << " triangles; " << far << " of " << n << " vertices beyond 0.5 voxel; on smooth parts "
+            << smooth_far << " of " << smooth << ", worst " << worst_smooth / vs << " voxel\n";
+  EXPECT_GT(n, 100000u);
+  // Away from creases every vertex is within half a voxel of the surface;
+  // at box edges and shape junctions the surface is rounded off by up to ~1.5 voxels.
+  EXPECT_EQ(smooth_far, 0u);
+  EXPECT_GT(smooth, n * 7 / 10);
+  EXPECT_LE(far, n / 100);
+  // The surface cloud too.
+  const auto cloud = mesher.surfaceCloud();
+  size_t cloud_far = 0;
+  for (const auto& p : cloud) {
+    const Eigen::Vector3d q(p.x, p.y, p.z);
+    cloud_far += std::abs(scene.sdf(q)) > 0.5 * vs && !nearCrease(scene, q, vs);
+  }
+  EXPECT_GT(cloud.size(), 10000u);
+  EXPECT_EQ(cloud_far, 0u);
+}
+
+TEST(TsdfUpdate, TruncationRuleAndWeightCap) {
+  const float mu = 0.2f;
+  FmVoxel v{0.0f, 0.0f};
+  // Behind the surface by more than mu: untouched.
+  EXPECT_EQ(fm_tsdf_update(&v, -0.2001f, mu, 3.0f), 0);
+  EXPECT_EQ(v.weight, 0.0f);
+  // Exactly -mu: D = -1.
+  EXPECT_EQ(fm_tsdf_update(&v, -0.2f, mu, 3.0f), 1);
+  EXPECT_FLOAT_EQ(v.tsdf, -1.0f);
+  EXPECT_FLOAT_EQ(v.weight, 1.0f);
+  // Far in front: clamped to 1. D = (1 * -1 + 1) / 2 = 0.
+  fm_tsdf_update(&v, 5.0f, mu, 3.0f);
+  EXPECT_FLOAT_EQ(v.tsdf, 0.0f);
+  EXPECT_FLOAT_EQ(v.weight, 2.0f);
+  // eta = 0.1: d = 0.5, D = (2 * 0 + 0.5) / 3 = 1/6, w = 3 (the cap).
+  fm_tsdf_update(&v, 0.1f, mu, 3.0f);
+  EXPECT_FLOAT_EQ(v.tsdf, 0.5f / 3.0f);
+  EXPECT_FLOAT_EQ(v.weight, 3.0f);
+  // At the cap the weight stays, and the average uses w = 3:
+  // D = (3 * 1/6 + 1) / 4 = 0.375.
+  fm_tsdf_update(&v, 1.0f, mu, 3.0f);
+  EXPECT_FLOAT_EQ(v.tsdf, 0.375f);
+  EXPECT_FLOAT_EQ(v.weight, 3.0f);
+}
+
+TEST(TsdfMap, WallIntegrationFollowsTheRule) {
+  // A pinhole camera at the origin of the world looking along +x at a wall
+  // x = 5 m. Along the optical axis the voxel at x has eta = 5 - x.
+  TsdfConfig cfg;
+  cfg.max_weight = 4;
+  TsdfMap map(cfg);
+  const CameraModel cam = CameraModel::pinhole(test::makeIntrinsics(100, 100, 63.5, 47.5, 128, 96));
+  const Eigen::Isometry3d T_W_C = lookAt(Eigen::Vector3d(0, 0, 1.0), Eigen::Vector3d(5, 0, 1.0));
+  Scene wall;
+  wall.ground = false;
+  wall.boxes.push_back({Eigen::Vector3d(5, -20, -20), Eigen::Vector3d(6, 20, 20)});
+  const cv::Mat depth = wall.render(cam, T_W_C);
+  for (int i = 0; i < 6; ++i) map.integrate(depth, cam, T_W_C, Eigen::Vector3d(0, 0, 0));
+  const double vs = cfg.voxel_size, mu = cfg.truncation();
+  // Voxel centres along the axis near (x, 0.025, 1.025) (y, z off by half a
+  // voxel; the ray through them hits the wall at x = 5, so eta = 5 - x + O(1e-4)).
+  int checked = 0;
+  for (int gx = 90; gx < 110; ++gx) {
+    const FmVoxel* v = map.voxel(Eigen::Vector3i(gx, 0, 20));
+    const double x = (gx + 0.5) * vs;
+    const double eta = 5.0 - x;
+    if (eta < -mu) {
+      EXPECT_TRUE(v == nullptr || v->weight == 0) << "voxel behind the band was updated, x " << x;
+      continue;
+    }
+    // Blocks are allocated only within mu of the measurement.
+    if (eta > mu && v == nullptr) continue;
+    ASSERT_NE(v, nullptr) << x;
+    EXPECT_EQ(v->weight, 4.0f) << x;  // six observations, capped at 4
+    EXPECT_NEAR(v->tsdf, std::min(1.0, eta / mu), 2e-3) << x;
+    ++checked;
+  }
+  EXPECT_GE(checked, 8);
+}
+
+// Drive past walls along x: ground and two facades at y = +-6 m.
+Scene street() {
+  Scene s;
+  s.boxes.push_back({Eigen::Vector3d(-1e3, 6, 0), Eigen::Vector3d(1e4, 7, 8)});
+  s.boxes.push_back({Eigen::Vector3d(-1e3, -7, 0), Eigen::Vector3d(1e4, -6, 8)});
+  s.min_incidence_cos = 0.2;
+  return s;
+}
+
+Eigen::Isometry3d carCamera(double x) {
+  return lookAt(Eigen::Vector3d(x, 0, 1.6), Eigen::Vector3d(x + 10, 0, 0.6));
+}
+
+TEST(TsdfMap, ActiveMemoryStaysBoundedOnALongDrive) {
+  TsdfConfig cfg;
+  cfg.voxel_size = 0.1;
+  cfg.local_map_size = Eigen::Vector3d(20, 20, 3);
+  TsdfMap map(cfg);
+  const CameraModel cam = smallFisheye();
+  const Scene s = street();
+  // Blocks of 0.8 m: the box holds at most (20/0.8 + 1)^2 * (3/0.8 + 1) blocks.
+  const size_t bound = 26 * 26 * 5;
+  size_t max_active = 0, active_at_100m = 0;
+  for (double x = 0; x <= 400; x += 2.0) {
+    const Eigen::Isometry3d T = carCamera(x);
+    map.integrate(s.render(cam, T), cam, T, Eigen::Vector3d(x, 0, 0));
+    max_active = std::max(max_active, map.numActiveBlocks());
+    if (x == 100) active_at_100m = map.numActiveBlocks();
+  }
+  std::cout << "active blocks: max " << max_active << ", at 100 m " << active_at_100m
+            << ", at 400 m " << map.numActiveBlocks() << "; all blocks " << map.numBlocks() << "\n";
+  EXPECT_LE(max_active, bound);
+  // The stored map keeps growing with the drive while the active part does not.
+  EXPECT_GT(map.numBlocks(), 8 * max_active);
+  EXPECT_LT(map.numActiveBlocks(), active_at_100m * 1.3);
+}
+
+void expectSameBlocks(const TsdfMap& a, const std::map<std::tuple<int, int, int>, VoxelBlock>& snapshot) {
+  ASSERT_EQ(a.numBlocks(), snapshot.size());
+  for (const auto& kv : snapshot) {
+    const auto& [x, y, z] = kv.first;
+    const VoxelBlock* b = a.block(BlockIndex(x, y, z));
+    ASSERT_NE(b, nullptr);
+    EXPECT_EQ(std::memcmp(b->voxels.data(), kv.second.voxels.data(), sizeof(b->voxels)), 0);
+  }
+}
+
+std::map<std::tuple<int, int, int>, VoxelBlock> snapshot(const TsdfMap& map) {
+  std::map<std::tuple<int, int, int>, VoxelBlock> out;
+  for (const BlockIndex& b : map.allBlocks()) out[{b.x(), b.y(), b.z()}] = *map.block(b);
+  return out;
+}
+
+class TsdfSwap : public ::testing::TestWithParam<bool> {};
+
+TEST_P(TsdfSwap, SwapOutThenInIsBitIdentical) {
+  TsdfConfig cfg;
+  cfg.voxel_size = 0.1;
+  cfg.local_map_size = Eigen::Vector3d(20, 20, 3);
+  const std::string dir = tempDir();
+  if (GetParam()) cfg.swap_directory = dir + "/swap";
+  TsdfMap map(cfg);
+  const CameraModel cam = smallFisheye();
+  const Scene s = street();
+  for (double x = 0; x <= 10; x += 2.0) {
+    map.integrate(s.render(cam, carCamera(x)), cam, carCamera(x), Eigen::Vector3d(x, 0, 0));
+  }
+  const auto before = snapshot(map);
+  const size_t active = map.numActiveBlocks();
+  ASSERT_GT(active, 100u);
+  // Drive far away: everything leaves the local map...
+  EXPECT_EQ(map.moveLocalMap(Eigen::Vector3d(1000, 0, 0)), active);
+  EXPECT_EQ(map.numActiveBlocks(), 0u);
+  EXPECT_EQ(map.numSwappedBlocks(), before.size());
+  expectSameBlocks(map, before);  // readable while swapped
+  map.dropSwapCache();
+  // ...and come back: the same blocks return, bit for bit.
+  map.moveLocalMap(Eigen::Vector3d(10, 0, 0));
+  EXPECT_EQ(map.numActiveBlocks(), active);
+  expectSameBlocks(map, before);
+  std::system(("rm -rf " + dir).c_str());
+}
+
+INSTANTIATE_TEST_SUITE_P(MemoryAndDisk, TsdfSwap, ::testing::Values(false, true),
+                         [](const auto& info) { return info.param ? "disk" : "memory"; });
+
+TEST(TsdfMap, SaveThenLoadIsBitIdenticalAndBadFilesChangeNothing) {
+  TsdfConfig cfg;
+  cfg.voxel_size = 0.1;
+  cfg.local_map_size = Eigen::Vector3d(20, 20, 3);
+  TsdfMap map(cfg);
+  const CameraModel cam = smallFisheye();
+  const Scene s = street();
+  for (double x = 0; x <= 40; x += 4.0) {
+    map.integrate(s.render(cam, carCamera(x)), cam, carCamera(x), Eigen::Vector3d(x, 0, 0));
+  }
+  ASSERT_GT(map.numSwappedBlocks(), 0u);  // both stores are saved
+  const auto before = snapshot(map);
+  const std::string dir = tempDir();
+  map.save(dir + "/map.fmtsdf");
+  TsdfMap loaded(cfg);
+  loaded.load(dir + "/map.fmtsdf");
+  expectSameBlocks(loaded, before);
+
+  // A truncated file: clear error, the map it was loaded into is untouched.
+  {
+    std::ifstream in(dir + "/map.fmtsdf", std::ios::binary);
+    std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    std::ofstream(dir + "/cut.fmtsdf", std::ios::binary) << bytes.substr(0, bytes.size() / 2);
+    std::ofstream(dir + "/junk.fmtsdf") << "not a map";
+  }
+  try {
+    loaded.load(dir + "/cut.fmtsdf");
+    FAIL();
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("truncated map file"), std::string::npos) << e.what();
+  }
+  expectSameBlocks(loaded, before);
+  EXPECT_THROW(loaded.load(dir + "/junk.fmtsdf"), std::runtime_error);
+  EXPECT_THROW(loaded.load(dir + "/missing.fmtsdf"), std::runtime_error);
+  TsdfConfig other = cfg;
+  other.voxel_size = 0.05;
+  TsdfMap wrong(other);
+  EXPECT_THROW(wrong.load(dir + "/map.fmtsdf"), std::runtime_error);
+  expectSameBlocks(loaded, before);
+  std::system(("rm -rf " + dir).c_str());
+}
+
+TEST(TsdfMap, BadInputIsRejectedAndTheMapKept) {
+  TsdfMap map;
+  const CameraModel cam = smallFisheye();
+  const Scene s = street();
+  map.integrate(s.render(cam, carCamera(0)), cam, carCamera(0), Eigen::Vector3d::Zero());
+  const auto before = snapshot(map);
+  cv::Mat wrong_type(cam.height(), cam.width(), CV_16UC1, cv::Scalar(1000));
+  cv::Mat wrong_size(100, 100, CV_32FC1, cv::Scalar(5.0f));
+  EXPECT_THROW(map.integrate(wrong_type, cam, carCamera(0), Eigen::Vector3d::Zero()), std::invalid_argument);
+  EXPECT_THROW(map.integrate(wrong_size, cam, carCamera(0), Eigen::Vector3d::Zero()), std::invalid_argument);
+  Eigen::Isometry3d bad = carCamera(0);
+  bad.translation().x() = NAN;
+  EXPECT_THROW(map.integrate(s.render(cam, carCamera(0)), cam, bad, Eigen::Vector3d::Zero()),
+               std::invalid_argument);
+  // inf and negative depths are no measurement.
+  cv::Mat junk(cam.height(), cam.width(), CV_32FC1, cv::Scalar(INFINITY));
+  junk.colRange(0, 50).setTo(-3.0f);
+  const IntegrationStats st = map.integrate(junk, cam, carCamera(0), Eigen::Vector3d::Zero());
+  EXPECT_EQ(st.valid_pixels, 0u);
+  expectSameBlocks(map, before);
+  TsdfConfig cfg;
+  cfg.voxel_size = -1;
+  EXPECT_THROW({ TsdfMap m(cfg); }, std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace fisheye_mapping
