@@ -8,7 +8,7 @@
 
 #include <gtest/gtest.h>
 
-#include "analytic_scene.h"
+#include "fisheye_mapping/core/analytic_scene.h"
 #include "fisheye_mapping/core/tsdf_map.h"
 #include "fisheye_mapping/core/tsdf_mesher.h"
 #include "test_utils.h"
@@ -16,8 +16,8 @@
 namespace fisheye_mapping {
 namespace {
 
-using test::lookAt;
-using test::Scene;
+using analytic::lookAt;
+using analytic::Scene;
 
 // The default rig's fisheye (unified, xi 0.98, radtan) at a quarter of the
 // resolution, to keep the tests fast.

@@ -1,7 +1,8 @@
-// Analytic scenes for the TSDF tests: ray casting of planes, spheres and boxes
-// to fisheye depth (range along the ray), and their exact signed distance.
-#ifndef FISHEYE_MAPPING_TEST_ANALYTIC_SCENE_H_
-#define FISHEYE_MAPPING_TEST_ANALYTIC_SCENE_H_
+// Analytic scenes (ground plane, spheres, boxes): exact signed distance, and
+// ray casting to depth images of any camera model (range along the ray, NaN
+// where no surface). Ground truth for the TSDF tests and the benchmark frames.
+#ifndef FISHEYE_MAPPING_CORE_ANALYTIC_SCENE_H_
+#define FISHEYE_MAPPING_CORE_ANALYTIC_SCENE_H_
 
 #include <algorithm>
 #include <cmath>
@@ -14,7 +15,7 @@
 #include "fisheye_mapping/core/camera_model.h"
 
 namespace fisheye_mapping {
-namespace test {
+namespace analytic {
 
 struct Sphere {
   Eigen::Vector3d c;
@@ -92,6 +93,7 @@ struct Scene {
   // Range image (CV_32FC1, NaN where no surface or grazing) of `cam` at T_W_C.
   cv::Mat render(const CameraModel& cam, const Eigen::Isometry3d& T_W_C) const {
     cv::Mat depth(cam.height(), cam.width(), CV_32FC1, cv::Scalar(NAN));
+#pragma omp parallel for schedule(dynamic, 4)
     for (int v = 0; v < cam.height(); ++v) {
       for (int u = 0; u < cam.width(); ++u) {
         Eigen::Vector3d ray;
@@ -121,7 +123,7 @@ inline Eigen::Isometry3d lookAt(const Eigen::Vector3d& position, const Eigen::Ve
   return T;
 }
 
-}  // namespace test
+}  // namespace analytic
 }  // namespace fisheye_mapping
 
-#endif  // FISHEYE_MAPPING_TEST_ANALYTIC_SCENE_H_
+#endif  // FISHEYE_MAPPING_CORE_ANALYTIC_SCENE_H_

@@ -1,0 +1,187 @@
+// tsdf_benchmark: times TSDF integration on street-like 1024x544 frames.
+//
+//   tsdf_benchmark --out DIR [--frames N] [--threads T]
+//
+// 1. Renders N pinhole frames (1024x544, fx 400) of an analytic street drive
+//    and writes them to DIR (z-depth, float32, for Open3D: frame_NNN.bin and
+//    poses.txt with the camera-to-world matrix per line), then integrates the
+//    same frames (as range along the ray) into our map: ms per frame.
+// 2. Our fisheye path on its own: the default rig's unified camera, same drive.
+// 3. Memory: process peak RSS, and the resident memory after a short and a
+//    long drive with the local map swapping to disk.
+// scripts/benchmark_tsdf runs this and Open3D on the same frames.
+#include <sys/resource.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <numeric>
+#include <string>
+#include <vector>
+
+#include "fisheye_mapping/core/analytic_scene.h"
+#include "fisheye_mapping/core/tsdf_map.h"
+
+namespace fm = fisheye_mapping;
+using fm::analytic::Scene;
+
+namespace {
+
+Scene streetScene(double length) {
+  Scene s;
+  s.min_incidence_cos = 0.0;
+  // Facades on both sides with varied setbacks, 12-20 m high.
+  for (double x = -20; x < length + 60; x += 12) {
+    const double k = std::fmod(x * 0.37, 1.0);
+    s.boxes.push_back({Eigen::Vector3d(x, 6.5 + 1.5 * k, 0), Eigen::Vector3d(x + 11.5, 12 + 1.5 * k, 12 + 8 * k)});
+    s.boxes.push_back({Eigen::Vector3d(x + 3, -12 - k, 0), Eigen::Vector3d(x + 14.5, -6.5 - 2 * k, 14 + 6 * k)});
+    // Parked cars, poles and round trees.
+    s.boxes.push_back({Eigen::Vector3d(x + 2, 4.0, 0), Eigen::Vector3d(x + 6.5, 5.8, 1.5)});
+    s.boxes.push_back({Eigen::Vector3d(x + 9, -5.0, 0), Eigen::Vector3d(x + 9.2, -4.8, 6)});
+    s.spheres.push_back({Eigen::Vector3d(x + 8, 5.5, 4.0), 1.6});
+  }
+  return s;
+}
+
+Eigen::Isometry3d cameraAt(double x) {
+  return fm::analytic::lookAt(Eigen::Vector3d(x, 0.3 * std::sin(x * 0.05), 1.6),
+                              Eigen::Vector3d(x + 20, 0.3 * std::sin(x * 0.05), 0.6));
+}
+
+double residentMiB() {
+  std::ifstream f("/proc/self/statm");
+  long pages_total = 0, pages_resident = 0;
+  f >> pages_total >> pages_resident;
+  return pages_resident * static_cast<double>(sysconf(_SC_PAGESIZE)) / (1024.0 * 1024.0);
+}
+
+double peakMiB() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return u.ru_maxrss / 1024.0;
+}
+
+struct Timing {
+  double mean_ms = 0, median_ms = 0;
+  size_t valid_pixels = 0;
+};
+
+Timing timeIntegration(fm::TsdfMap& map, const fm::CameraModel& cam, const std::vector<cv::Mat>& frames,
+                       const std::vector<Eigen::Isometry3d>& poses) {
+  std::vector<double> ms;
+  Timing t;
+  for (size_t i = 0; i < frames.size(); ++i) {
+    const auto start = std::chrono::steady_clock::now();
+    const auto stats = map.integrate(frames[i], cam, poses[i],
+                                     Eigen::Vector3d(poses[i].translation().x(), poses[i].translation().y(), 0));
+    ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
+    t.valid_pixels += stats.valid_pixels;
+  }
+  t.valid_pixels /= frames.size();
+  t.mean_ms = std::accumulate(ms.begin(), ms.end(), 0.0) / ms.size();
+  std::sort(ms.begin(), ms.end());
+  t.median_ms = ms[ms.size() / 2];
+  return t;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string out;
+  int n_frames = 30, threads = 0;
+  for (int i = 1; i + 1 < argc; i += 2) {
+    const std::string a = argv[i];
+    if (a == "--out") out = argv[i + 1];
+    else if (a == "--frames") n_frames = std::stoi(argv[i + 1]);
+    else if (a == "--threads") threads = std::stoi(argv[i + 1]);
+    else {
+      std::cerr << "tsdf_benchmark: unknown argument " << a << "\n";
+      return 2;
+    }
+  }
+  if (out.empty() || n_frames < 1) {
+    std::cerr << "usage: tsdf_benchmark --out DIR [--frames N] [--threads T]\n";
+    return 2;
+  }
+  std::filesystem::create_directories(out);
+  const double step = 1.0;  // metres between frames
+  const Scene scene = streetScene(n_frames * step);
+
+  fm::Intrinsics in;
+  in.width = 1024, in.height = 544, in.fx = 400, in.fy = 400, in.cx = 511.5, in.cy = 271.5;
+  const fm::CameraModel pinhole = fm::CameraModel::pinhole(in);
+  const fm::CameraModel fisheye = fm::CameraModel::unified(
+      [] { fm::Intrinsics f; f.width = 1024, f.height = 544, f.fx = 520, f.fy = 520, f.cx = 511.5, f.cy = 271.5; return f; }(),
+      0.98, -0.02, 0.004, 2e-4, -1e-4);
+
+  // Pinhole frames: range images for us, z-depth files for Open3D.
+  std::vector<cv::Mat> frames, fisheye_frames;
+  std::vector<Eigen::Isometry3d> poses;
+  std::ofstream pose_file(out + "/poses.txt");
+  for (int i = 0; i < n_frames; ++i) {
+    const Eigen::Isometry3d T = cameraAt(i * step);
+    cv::Mat range = scene.render(pinhole, T);
+    cv::Mat z(range.size(), CV_32FC1);
+    for (int v = 0; v < range.rows; ++v) {
+      for (int u = 0; u < range.cols; ++u) {
+        Eigen::Vector3d ray;
+        pinhole.unproject(Eigen::Vector2d(u, v), &ray);
+        const float r = range.at<float>(v, u);
+        z.at<float>(v, u) = std::isfinite(r) ? static_cast<float>(r * ray.z()) : 0.0f;
+      }
+    }
+    char name[64];
+    std::snprintf(name, sizeof(name), "/frame_%03d.bin", i);
+    std::ofstream(out + name, std::ios::binary).write(reinterpret_cast<const char*>(z.ptr<float>()), z.total() * 4);
+    const Eigen::Matrix4d M = T.matrix();
+    for (int k = 0; k < 16; ++k) pose_file << M(k / 4, k % 4) << (k == 15 ? "\n" : " ");
+    frames.push_back(range);
+    poses.push_back(T);
+    fisheye_frames.push_back(scene.render(fisheye, T));
+  }
+  pose_file.close();
+  std::ofstream(out + "/intrinsics.txt") << in.width << " " << in.height << " " << in.fx << " " << in.fy << " "
+                                         << in.cx << " " << in.cy << "\n";
+
+  fm::TsdfConfig cfg;  // 5 cm voxels, 0.2 m truncation
+  cfg.threads = threads;
+  {
+    fm::TsdfMap map(cfg);
+    const Timing t = timeIntegration(map, pinhole, frames, poses);
+    std::printf("ours pinhole: %.1f ms/frame (median %.1f), %zu valid pixels/frame, %zu blocks\n", t.mean_ms,
+                t.median_ms, t.valid_pixels, map.numBlocks());
+  }
+  {
+    fm::TsdfMap map(cfg);
+    const Timing t = timeIntegration(map, fisheye, fisheye_frames, poses);
+    std::printf("ours fisheye: %.1f ms/frame (median %.1f), %zu valid pixels/frame, %zu blocks\n", t.mean_ms,
+                t.median_ms, t.valid_pixels, map.numBlocks());
+  }
+  frames.clear();
+  fisheye_frames.clear();
+  std::printf("ours peak RSS: %.0f MiB\n", peakMiB());
+
+  // Long against short drive: the local map swaps to disk, the fisheye camera
+  // renders each frame of a straight drive at 2 m steps.
+  for (double length : {100.0, 1000.0}) {
+    fm::TsdfConfig c = cfg;
+    c.swap_directory = out + "/swap";
+    std::filesystem::remove_all(c.swap_directory);
+    const Scene long_scene = streetScene(length);
+    const double before = residentMiB();
+    fm::TsdfMap map(c);
+    for (double x = 0; x <= length; x += 2.0) {
+      const Eigen::Isometry3d T = cameraAt(x);
+      map.integrate(long_scene.render(fisheye, T), fisheye, T, Eigen::Vector3d(x, 0, 0));
+    }
+    std::printf("drive %.0f m: %zu blocks in all, %zu active (%.0f MiB), process resident %.0f MiB (+%.0f MiB)\n",
+                length, map.numBlocks(), map.numActiveBlocks(), map.activeMemoryBytes() / 1048576.0,
+                residentMiB(), residentMiB() - before);
+  }
+  std::filesystem::remove_all(out + "/swap");
+  return 0;
+}
