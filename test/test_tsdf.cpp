@@ -9,6 +9,7 @@
 #include <gtest/gtest.h>
 
 #include "fisheye_mapping/core/analytic_scene.h"
+#include "fisheye_mapping/core/opencl_context.h"
 #include "fisheye_mapping/core/tsdf_map.h"
 #include "fisheye_mapping/core/tsdf_mesher.h"
 #include "test_utils.h"
@@ -348,6 +349,49 @@ TEST(TsdfMap, SaveThenLoadIsBitIdenticalAndBadFilesChangeNothing) {
   EXPECT_THROW(wrong.load(dir + "/map.fmtsdf"), std::runtime_error);
   expectSameBlocks(loaded, before);
   std::system(("rm -rf " + dir).c_str());
+}
+
+TEST(TsdfMap, OpenClIntegratorAgreesWithCpu) {
+  if (OpenClContext::listDevices().empty()) GTEST_SKIP() << "no OpenCL device";
+  TsdfConfig cpu_cfg, cl_cfg;
+  cl_cfg.integrator = "opencl";
+  TsdfMap cpu(cpu_cfg), cl(cl_cfg);
+  const CameraModel cam = smallFisheye();
+  const Scene scene = objectsScene();
+  const auto poses = orbit();
+  for (size_t i = 0; i < poses.size(); i += 3) {
+    const cv::Mat depth = scene.render(cam, poses[i]);
+    const Eigen::Vector3d vehicle(poses[i].translation().x(), poses[i].translation().y(), 0);
+    cpu.integrate(depth, cam, poses[i], vehicle);
+    cl.integrate(depth, cam, poses[i], vehicle);
+  }
+  ASSERT_EQ(cpu.numBlocks(), cl.numBlocks());
+  ASSERT_GT(cpu.numBlocks(), 500u);
+  // Float rounding differs between compilers (OpenCL contracts a * b + c into
+  // FMAs): a voxel right at a pixel's border or at eta = -mu may go either way.
+  double worst = 0;
+  size_t observed = 0, weight_differs = 0, tsdf_differs = 0;
+  for (const BlockIndex& b : cpu.allBlocks()) {
+    const VoxelBlock* a = cpu.block(b);
+    const VoxelBlock* c = cl.block(b);
+    ASSERT_NE(c, nullptr);
+    for (int v = 0; v < FM_BLOCK_VOXELS; ++v) {
+      if (a->voxels[v].weight != c->voxels[v].weight) {
+        ++weight_differs;
+        continue;
+      }
+      const double diff = std::abs(a->voxels[v].tsdf - c->voxels[v].tsdf);
+      worst = std::max(worst, diff);
+      tsdf_differs += diff > 1e-4;
+      observed += a->voxels[v].weight > 0;
+    }
+  }
+  std::cout << observed << " observed voxels, " << weight_differs << " with another weight, " << tsdf_differs
+            << " with a tsdf differing by more than 1e-4 (worst " << worst << ")\n";
+  EXPECT_GT(observed, 100000u);
+  EXPECT_LE(weight_differs, observed / 1000);
+  EXPECT_LE(tsdf_differs, observed / 1000);
+  EXPECT_EQ(cpu.takeChangedBlocks().size(), cl.takeChangedBlocks().size());
 }
 
 TEST(TsdfMap, BadInputIsRejectedAndTheMapKept) {

@@ -1,5 +1,7 @@
 #include "fisheye_mapping/core/tsdf_map.h"
 
+#include "fisheye_mapping/core/tsdf_integrator_cl.h"
+
 #include <omp.h>
 
 #include <cmath>
@@ -35,6 +37,9 @@ void TsdfConfig::validate() const {
   if (!local_map_offset.allFinite()) throw std::invalid_argument("TsdfConfig.local_map_offset must be finite");
   if (min_observations < 1) throw std::invalid_argument("TsdfConfig.min_observations must be >= 1");
   if (threads < 0) throw std::invalid_argument("TsdfConfig.threads must be >= 0");
+  if (integrator != "cpu" && integrator != "opencl") {
+    throw std::invalid_argument("TsdfConfig.integrator must be 'cpu' or 'opencl', got '" + integrator + "'");
+  }
 }
 
 // Unit rays of every pixel of one camera, computed once (unprojection inverts
@@ -47,6 +52,7 @@ struct TsdfMap::RayTable {
 TsdfMap::TsdfMap(const TsdfConfig& config) : config_(config) {
   config_.validate();
   if (!config_.swap_directory.empty()) std::filesystem::create_directories(config_.swap_directory);
+  if (config_.integrator == "opencl") opencl_ = std::make_unique<TsdfIntegratorCl>(config_.opencl_device);
 }
 
 TsdfMap::~TsdfMap() = default;
@@ -230,9 +236,28 @@ IntegrationStats TsdfMap::integrate(const cv::Mat& depth, const CameraModel& cam
   for (int r = 0; r < 3; ++r) {
     for (int c = 0; c < 4; ++c) T_C_W[4 * r + c] = static_cast<float>(T_C_W_d.matrix()(r, c));
   }
+  std::vector<char> changed;
+  if (opencl_) {
+    opencl_->integrate(work, depth_c, cam, T_C_W, static_cast<float>(config_.voxel_size), mu,
+                       config_.max_weight, &changed);
+  } else {
+    integrateCpu(work, d_ptr, cam, T_C_W, &changed);
+  }
+  for (size_t n = 0; n < work.size(); ++n) {
+    if (changed[n]) changed_.insert(work[n].first);
+  }
+
+  // 3. Local map: swap out what the vehicle left behind.
+  stats.blocks_swapped_out = moveLocalMap(vehicle_W);
+  return stats;
+}
+
+void TsdfMap::integrateCpu(const std::vector<std::pair<BlockIndex, VoxelBlock*>>& work, const float* depth,
+                           const FmCameraT<float>& cam, const float T_C_W[12], std::vector<char>* changed) const {
   const float vs = static_cast<float>(config_.voxel_size);
+  const float mu = static_cast<float>(config_.truncation());
   const float max_w = config_.max_weight;
-  std::vector<char> changed(work.size(), 0);
+  changed->assign(work.size(), 0);
 #pragma omp parallel for schedule(dynamic, 4)
   for (size_t n = 0; n < work.size(); ++n) {
     const BlockIndex& b = work[n].first;
@@ -245,20 +270,13 @@ IntegrationStats TsdfMap::integrate(const cv::Mat& depth, const CameraModel& cam
         const float py = (origin.y() + j + 0.5f) * vs;
         for (int i = 0; i < FM_BLOCK_SIDE; ++i) {
           const float px = (origin.x() + i + 0.5f) * vs;
-          any |= fm_tsdf_integrate_voxel(&voxels[VoxelBlock::linear(i, j, k)], px, py, pz, &cam,
-                                         T_C_W, d_ptr, mu, max_w);
+          any |= fm_tsdf_integrate_voxel(&voxels[VoxelBlock::linear(i, j, k)], px, py, pz, &cam, T_C_W,
+                                         depth, mu, max_w);
         }
       }
     }
-    changed[n] = static_cast<char>(any);
+    (*changed)[n] = static_cast<char>(any);
   }
-  for (size_t n = 0; n < work.size(); ++n) {
-    if (changed[n]) changed_.insert(work[n].first);
-  }
-
-  // 3. Local map: swap out what the vehicle left behind.
-  stats.blocks_swapped_out = moveLocalMap(vehicle_W);
-  return stats;
 }
 
 const VoxelBlock* TsdfMap::block(const BlockIndex& index) const {

@@ -155,6 +155,15 @@ int main(int argc, char** argv) {
     std::printf("ours pinhole: %.1f ms/frame (median %.1f), %zu valid pixels/frame, %zu blocks\n", t.mean_ms,
                 t.median_ms, t.valid_pixels, map.numBlocks());
   }
+  try {
+    fm::TsdfConfig c = cfg;
+    c.integrator = "opencl";
+    fm::TsdfMap map(c);
+    const Timing t = timeIntegration(map, pinhole, frames, poses);
+    std::printf("ours pinhole, OpenCL integrator: %.1f ms/frame (median %.1f)\n", t.mean_ms, t.median_ms);
+  } catch (const std::exception& e) {
+    std::printf("ours pinhole, OpenCL integrator: not run (%s)\n", e.what());
+  }
   {
     fm::TsdfMap map(cfg);
     const Timing t = timeIntegration(map, fisheye, fisheye_frames, poses);

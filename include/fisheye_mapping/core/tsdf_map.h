@@ -34,6 +34,10 @@ struct TsdfConfig {
   Eigen::Vector3d local_map_offset = Eigen::Vector3d(0.0, 0.0, 1.0);
   std::string swap_directory;  // empty: swapped blocks stay in host memory
   int threads = 0;             // 0: all cores
+  // Voxel integration: "cpu" (OpenMP loop) or "opencl" (same function as a
+  // kernel, on opencl_device; see OpenClContext for the syntax).
+  std::string integrator = "cpu";
+  std::string opencl_device;
 
   double truncation() const { return truncation_voxels * voxel_size; }
   double blockSize() const { return FM_BLOCK_SIDE * voxel_size; }
@@ -119,6 +123,8 @@ class TsdfMap {
 
  private:
   struct RayTable;
+  void integrateCpu(const std::vector<std::pair<BlockIndex, VoxelBlock*>>& work, const float* depth,
+                    const FmCameraT<float>& cam, const float T_C_W[12], std::vector<char>* changed) const;
   const RayTable& raysFor(const CameraModel& camera);
   void swapOut(const BlockIndex& index);
   std::unique_ptr<VoxelBlock> takeSwapped(const BlockIndex& index);
@@ -133,6 +139,7 @@ class TsdfMap {
   mutable std::unordered_map<BlockIndex, std::unique_ptr<VoxelBlock>, BlockIndexHash> disk_cache_;
   BlockSet changed_;
   std::vector<std::unique_ptr<RayTable>> ray_tables_;
+  std::unique_ptr<class TsdfIntegratorCl> opencl_;
 };
 
 }  // namespace fisheye_mapping
