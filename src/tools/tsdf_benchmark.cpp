@@ -1,14 +1,16 @@
 // tsdf_benchmark: times TSDF integration on street-like 1024x544 frames.
 //
 //   tsdf_benchmark --out DIR [--frames N] [--threads T]
+//   tsdf_benchmark --drive METRES --out DIR   (memory of one drive, alone in its process)
 //
 // 1. Renders N pinhole frames (1024x544, fx 400) of an analytic street drive
 //    and writes them to DIR (z-depth, float32, for Open3D: frame_NNN.bin and
 //    poses.txt with the camera-to-world matrix per line), then integrates the
 //    same frames (as range along the ray) into our map: ms per frame.
 // 2. Our fisheye path on its own: the default rig's unified camera, same drive.
-// 3. Memory: process peak RSS, and the resident memory after a short and a
-//    long drive with the local map swapping to disk.
+// 3. Memory: process peak RSS; with --drive, the resident memory after a drive
+//    of that length with the local map swapping to disk (run it for a short
+//    and a long drive, each in its own process).
 // scripts/benchmark_tsdf runs this and Open3D on the same frames.
 #include <sys/resource.h>
 #include <unistd.h>
@@ -93,11 +95,13 @@ Timing timeIntegration(fm::TsdfMap& map, const fm::CameraModel& cam, const std::
 int main(int argc, char** argv) {
   std::string out;
   int n_frames = 30, threads = 0;
+  double drive = 0;
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string a = argv[i];
     if (a == "--out") out = argv[i + 1];
     else if (a == "--frames") n_frames = std::stoi(argv[i + 1]);
     else if (a == "--threads") threads = std::stoi(argv[i + 1]);
+    else if (a == "--drive") drive = std::stod(argv[i + 1]);
     else {
       std::cerr << "tsdf_benchmark: unknown argument " << a << "\n";
       return 2;
@@ -117,6 +121,25 @@ int main(int argc, char** argv) {
   const fm::CameraModel fisheye = fm::CameraModel::unified(
       [] { fm::Intrinsics f; f.width = 1024, f.height = 544, f.fx = 520, f.fy = 520, f.cx = 511.5, f.cy = 271.5; return f; }(),
       0.98, -0.02, 0.004, 2e-4, -1e-4);
+
+  if (drive > 0) {
+    // One drive at 2 m steps, fisheye frames, local map swapping to disk.
+    fm::TsdfConfig c;
+    c.threads = threads;
+    c.swap_directory = out + "/swap";
+    std::filesystem::remove_all(c.swap_directory);
+    const Scene long_scene = streetScene(drive);
+    fm::TsdfMap map(c);
+    for (double x = 0; x <= drive; x += 2.0) {
+      const Eigen::Isometry3d T = cameraAt(x);
+      map.integrate(long_scene.render(fisheye, T), fisheye, T, Eigen::Vector3d(x, 0, 0));
+    }
+    std::printf("drive %.0f m: %zu blocks in all, %zu active (%.0f MiB), process resident %.0f MiB, peak %.0f MiB\n",
+                drive, map.numBlocks(), map.numActiveBlocks(), map.activeMemoryBytes() / 1048576.0, residentMiB(),
+                peakMiB());
+    std::filesystem::remove_all(c.swap_directory);
+    return 0;
+  }
 
   // Pinhole frames: range images for us, z-depth files for Open3D.
   std::vector<cv::Mat> frames, fisheye_frames;
@@ -174,23 +197,6 @@ int main(int argc, char** argv) {
   fisheye_frames.clear();
   std::printf("ours peak RSS: %.0f MiB\n", peakMiB());
 
-  // Long against short drive: the local map swaps to disk, the fisheye camera
-  // renders each frame of a straight drive at 2 m steps.
-  for (double length : {100.0, 1000.0}) {
-    fm::TsdfConfig c = cfg;
-    c.swap_directory = out + "/swap";
-    std::filesystem::remove_all(c.swap_directory);
-    const Scene long_scene = streetScene(length);
-    const double before = residentMiB();
-    fm::TsdfMap map(c);
-    for (double x = 0; x <= length; x += 2.0) {
-      const Eigen::Isometry3d T = cameraAt(x);
-      map.integrate(long_scene.render(fisheye, T), fisheye, T, Eigen::Vector3d(x, 0, 0));
-    }
-    std::printf("drive %.0f m: %zu blocks in all, %zu active (%.0f MiB), process resident %.0f MiB (+%.0f MiB)\n",
-                length, map.numBlocks(), map.numActiveBlocks(), map.activeMemoryBytes() / 1048576.0,
-                residentMiB(), residentMiB() - before);
-  }
   std::filesystem::remove_all(out + "/swap");
   return 0;
 }
