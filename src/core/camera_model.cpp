@@ -213,6 +213,21 @@ double CameraModel::maxValidAngle() const {
   return M_PI;
 }
 
+std::vector<Eigen::Vector3f> pixelRays(const CameraModel& camera) {
+  const int w = camera.width(), h = camera.height();
+  std::vector<Eigen::Vector3f> rays(static_cast<size_t>(w) * h);
+#pragma omp parallel for schedule(static)
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      Eigen::Vector3d ray;
+      rays[static_cast<size_t>(v) * w + u] = camera.unproject(Eigen::Vector2d(u, v), &ray)
+                                                 ? Eigen::Vector3f(ray.cast<float>())
+                                                 : Eigen::Vector3f::Constant(NAN);
+    }
+  }
+  return rays;
+}
+
 FmCameraT<float> CameraModel::floatParams() const {
   FmCameraT<float> f{};
   f.model = params_.model;

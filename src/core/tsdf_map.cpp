@@ -63,17 +63,7 @@ const TsdfMap::RayTable& TsdfMap::raysFor(const CameraModel& camera) {
   }
   auto table = std::make_unique<RayTable>();
   table->params = camera.params();
-  const int w = camera.width(), h = camera.height();
-  table->rays.resize(static_cast<size_t>(w) * h);
-#pragma omp parallel for schedule(static)
-  for (int v = 0; v < h; ++v) {
-    for (int u = 0; u < w; ++u) {
-      Eigen::Vector3d ray;
-      table->rays[static_cast<size_t>(v) * w + u] =
-          camera.unproject(Eigen::Vector2d(u, v), &ray) ? Eigen::Vector3f(ray.cast<float>())
-                                                         : Eigen::Vector3f::Constant(NAN);
-    }
-  }
+  table->rays = pixelRays(camera);
   ray_tables_.push_back(std::move(table));
   return *ray_tables_.back();
 }

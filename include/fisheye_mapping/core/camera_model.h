@@ -8,6 +8,7 @@
 #define FISHEYE_MAPPING_CORE_CAMERA_MODEL_H_
 
 #include <string>
+#include <vector>
 
 #include <Eigen/Core>
 
@@ -74,6 +75,11 @@ class CameraModel {
   static CameraModel make(CameraModelType type, const Intrinsics& in);
   FmCameraT<double> params_{};
 };
+
+// Unit ray of every pixel centre (row-major, width * height), NaN where the
+// pixel is outside the model's domain. Unprojection inverts distortion by
+// Newton steps: compute this once per camera, not per frame. Uses all cores.
+std::vector<Eigen::Vector3f> pixelRays(const CameraModel& camera);
 
 }  // namespace fisheye_mapping
 
