@@ -151,12 +151,12 @@ Eigen::Vector3d World::routePoint(double s, Eigen::Vector2d* tangent) const {
 
 Eigen::Isometry3d World::egoPose(double t) const {
   Eigen::Vector2d tan;
-  // Ego drives in the right lane, 1.75 m right of the centreline.
+  // Ego drives in the right lane, 1.5 lanes right of the centreline.
   const Eigen::Vector3d c = routePoint(20.0 + config_.speed * t, &tan);
   const Eigen::Vector3d right(tan.y(), -tan.x(), 0.0);
   Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
   T.linear() = Eigen::AngleAxisd(std::atan2(tan.y(), tan.x()), Eigen::Vector3d::UnitZ()).toRotationMatrix();
-  T.translation() = c + 1.75 * right;
+  T.translation() = c + 1.5 * kLane * right;
   return T;
 }
 
@@ -204,8 +204,8 @@ void World::addStreetSide(const Eigen::Vector2d& a, const Eigen::Vector2d& b, co
     for (double s = edge + 4; s < len - edge - 6; s += 6 + 8 * U(rng)) {
       if (U(rng) < 0.5) continue;
       const float paint = 0.15f + 0.7f * static_cast<float>(U(rng));
-      box2(s, s + 4.4, kRoadHalfWidth - 1.9, kRoadHalfWidth - 0.1, 0.3, 1.1, kCarPaint, paint);
-      box2(s + 1.0, s + 3.2, kRoadHalfWidth - 1.8, kRoadHalfWidth - 0.2, 1.1, 1.5, kCarPaint, paint);
+      box2(s, s + 4.4, kRoadHalfWidth - 1.85, kRoadHalfWidth - 0.05, 0.3, 1.1, kCarPaint, paint);
+      box2(s + 1.0, s + 3.2, kRoadHalfWidth - 1.75, kRoadHalfWidth - 0.15, 1.1, 1.5, kCarPaint, paint);
       s += 4.4;
     }
   } else if (config_.preset == "forest") {
@@ -249,11 +249,11 @@ void World::build() {
     MovingVehicle v;
     v.albedo = 0.15f + 0.7f * static_cast<float>(U(rng));
     if (i % 2 == 0) {
-      v.lateral = 1.75;
+      v.lateral = (i % 4 == 0 ? 0.5 : 1.5) * kLane;
       v.speed = -(6 + 6 * U(rng));
       v.s0 = 60 + (config_.route_length + 80) * (i / 2 + 0.5 + 0.3 * U(rng)) / std::max(1, (config_.moving_vehicles + 1) / 2);
     } else {
-      v.lateral = -1.75;
+      v.lateral = -0.5 * kLane;  // inner lane: passes the ego on its left
       v.speed = config_.speed + 3 + 4 * U(rng);
       v.s0 = 20 - 15 - 40 * (i / 2) - 20 * U(rng);
     }
@@ -367,9 +367,10 @@ float World::shade(const Hit& h, const Eigen::Vector3d& p, const Eigen::Vector3d
       const bool crossing = dx < kRoadHalfWidth && dy < kRoadHalfWidth;
       if (dist < kRoadHalfWidth) {
         albedo = 0.28f + 0.16f * fbm(p * 9.0, seed) + 0.05f * noise(p * 40.0, seed + 5);
-        const bool centre = dist < 0.08 && std::fmod(std::abs(along), 6.0) < 3.0;
-        const bool edge_line = dist > 3.45 && dist < 3.6;
-        if (!crossing && (centre || edge_line)) albedo = 0.85f;
+        const bool centre = dist < 0.08;
+        const bool lane_line = std::abs(dist - kLane) < 0.075 && std::fmod(std::abs(along), 6.0) < 3.0;
+        const bool edge_line = dist > 2 * kLane - 0.05 && dist < 2 * kLane + 0.1;
+        if (!crossing && (centre || lane_line || edge_line)) albedo = 0.85f;
       } else if (config_.preset == "urban" && dist < kRoadHalfWidth + 0.3) {
         albedo = 0.62f + 0.05f * noise(p * 10.0, seed + 6);
       } else if (config_.preset == "urban" && dist < kRoadHalfWidth + kSidewalk) {

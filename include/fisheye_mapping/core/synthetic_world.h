@@ -111,7 +111,11 @@ class World {
 
   // Street geometry (shared by the texture of the ground and the builder).
   static constexpr double kBlock = 90.0;        // street spacing
-  static constexpr double kRoadHalfWidth = 5.0;  // two 3.5 m lanes + margins
+  // Four 3.5 m lanes (two each way) and a parking strip on both sides. The ego
+  // drives in the right lane; overtaking vehicles pass it in the inner lane,
+  // oncoming ones use the other two.
+  static constexpr double kRoadHalfWidth = 9.0;
+  static constexpr double kLane = 3.5;
   static constexpr double kSidewalk = 3.0;
 
  private:
