@@ -97,15 +97,25 @@ TEST(SyntheticWorld, DepthAgreesAcrossCameras) {
         const Eigen::Vector3d Xc = poses[other].inverse() * X;
         Eigen::Vector2d uv;
         if (!cam.model.project(Xc, &uv) || !cam.model.isInImage(uv)) continue;
-        const float d2 = frames[other].depth.at<float>(int(std::lround(uv.y())), int(std::lround(uv.x())));
+        // Bilinear depth of the other camera, on smooth surfaces only (all four
+        // neighbours within 5 % of each other): depth edges are where pixel
+        // sampling, not the renderer, decides.
+        const int u0 = static_cast<int>(std::floor(uv.x())), v0 = static_cast<int>(std::floor(uv.y()));
+        if (u0 + 1 >= 256 || v0 + 1 >= 136) continue;
+        const cv::Mat& D = frames[other].depth;
+        const float q[4] = {D.at<float>(v0, u0), D.at<float>(v0, u0 + 1), D.at<float>(v0 + 1, u0), D.at<float>(v0 + 1, u0 + 1)};
+        const float lo = std::min({q[0], q[1], q[2], q[3]}), hi = std::max({q[0], q[1], q[2], q[3]});
+        if (!std::isfinite(lo) || !std::isfinite(hi) || hi > 1.05f * lo) continue;
+        const double a = uv.x() - u0, b = uv.y() - v0;
+        const double d2 = (1 - a) * (1 - b) * q[0] + a * (1 - b) * q[1] + (1 - a) * b * q[2] + a * b * q[3];
         ++checked;
-        agree += std::isfinite(d2) && std::abs(d2 - Xc.norm()) < 0.02 * Xc.norm();
+        agree += std::abs(d2 - Xc.norm()) < 0.01 * Xc.norm();
       }
     }
-    std::cout << "cam0 -> cam" << other << ": " << agree << " of " << checked << " points agree within 2 %\n";
+    std::cout << "cam0 -> cam" << other << ": " << agree << " of " << checked << " points agree within 1 %\n";
     EXPECT_GT(checked, 3000);
-    // Occlusions between the views and pixel rounding at depth edges account for the rest.
-    EXPECT_GE(agree, checked * 95 / 100);
+    // Surfaces seen by cam0 but hidden from the other camera account for the rest.
+    EXPECT_GE(agree, checked * 97 / 100);
   }
 }
 
