@@ -201,6 +201,13 @@ void World::addStreetSide(const Eigen::Vector2d& a, const Eigen::Vector2d& b, co
     for (double s = edge + 5 + 10 * U(rng); s < len - edge; s += 22 + 10 * U(rng)) {
       box2(s, s + 0.18, kRoadHalfWidth + 0.6, kRoadHalfWidth + 0.78, 0, 5.5, kMetal, 0.35f);
     }
+    // Street trees on the sidewalk.
+    for (double s = edge + 12 + 10 * U(rng); s < len - edge - 3; s += 25 + 20 * U(rng)) {
+      const double l = kRoadHalfWidth + 1.7, r = 1.2 + 0.6 * U(rng);
+      box2(s, s + 0.3, l, l + 0.3, 0, 3.5, kBark, 0.32f);
+      const Eigen::Vector2d c = a + (s + 0.15) * dir + (l + 0.15) * left;
+      spheres_.push_back({Eigen::Vector3d(c.x(), c.y(), 3.3 + r), r, kFoliage, 0.6f + 0.2f * static_cast<float>(U(rng))});
+    }
     for (double s = edge + 4; s < len - edge - 6; s += 6 + 8 * U(rng)) {
       if (U(rng) < 0.5) continue;
       const float paint = 0.15f + 0.7f * static_cast<float>(U(rng));
