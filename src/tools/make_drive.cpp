@@ -10,6 +10,8 @@
 // /cam0/detections_gt (fisheye_mapping/Detection2DArray: moving vehicles in
 // the reference camera, stamped with the image), /tf (map -> base_link at
 // 100 Hz), /tf_static (base_link -> camera frames).
+#include <unistd.h>
+
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -223,11 +225,15 @@ int main(int argc, char** argv) {
         }
       }
       const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count();
-      std::fprintf(stderr, "\rmake_drive: %d/%d frame sets, %.1f s", s + 1, n_sets, elapsed);
+      if (isatty(STDERR_FILENO)) {
+        std::fprintf(stderr, "\rmake_drive: %d/%d frame sets, %.1f s", s + 1, n_sets, elapsed);
+      } else if ((s + 1) % std::max(1, n_sets / 10) == 0) {
+        std::fprintf(stderr, "make_drive: %d/%d frame sets, %.1f s\n", s + 1, n_sets, elapsed);
+      }
     }
     bag.close();
     const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count();
-    std::fprintf(stderr, "\n");
+    if (isatty(STDERR_FILENO)) std::fprintf(stderr, "\n");
     std::printf("make_drive: %s preset, seed %u: %d frame sets x %zu cameras (%zu images written, %zu dropped) "
                 "rendered and written in %.1f s -> %s\n",
                 opt.preset.c_str(), opt.seed, n_sets, rig.cameras.size(), images, dropped, elapsed, bag_path.c_str());
