@@ -289,7 +289,18 @@ void World::indexGrid() {
   }
 }
 
+std::vector<Eigen::Isometry3d> World::vehiclePoses(double time) const {
+  std::vector<Eigen::Isometry3d> poses;
+  for (int i = 0; i < numVehicles(); ++i) poses.push_back(vehiclePose(i, time));
+  return poses;
+}
+
 Hit World::cast(const Eigen::Vector3d& o, const Eigen::Vector3d& d, double time, double max_range) const {
+  return cast(o, d, vehiclePoses(time), max_range);
+}
+
+Hit World::cast(const Eigen::Vector3d& o, const Eigen::Vector3d& d, const std::vector<Eigen::Isometry3d>& vehicles,
+                double max_range) const {
   Hit best;
   best.t = max_range;
   // Ground.
@@ -344,8 +355,8 @@ Hit World::cast(const Eigen::Vector3d& o, const Eigen::Vector3d& d, double time,
     }
   }
   // Moving vehicles (oriented boxes).
-  for (int i = 0; i < numVehicles(); ++i) {
-    const Eigen::Isometry3d T = vehiclePose(i, time);
+  for (int i = 0; i < static_cast<int>(vehicles.size()); ++i) {
+    const Eigen::Isometry3d& T = vehicles[i];
     if ((T.translation() - o).squaredNorm() > (best.t + 5) * (best.t + 5)) continue;
     const Eigen::Vector3d ol = T.inverse() * o, dl = T.linear().transpose() * d;
     for (const Box& part : kCarParts) {
@@ -434,6 +445,7 @@ World::Frame World::render(const CameraModel& camera, const std::vector<Eigen::V
   f.ids.create(h, w, CV_16SC1);
   const Eigen::Vector3d o = T_W_C.translation();
   const Eigen::Matrix3d R = T_W_C.linear();
+  const std::vector<Eigen::Isometry3d> vehicles = vehiclePoses(time);
 #pragma omp parallel for schedule(dynamic, 4)
   for (int v = 0; v < h; ++v) {
     std::mt19937_64 rng(noise_seed * 1000003ull + static_cast<uint64_t>(v));
@@ -448,7 +460,7 @@ World::Frame World::render(const CameraModel& camera, const std::vector<Eigen::V
       ids[u] = -1;
       if (rc.z() == rc.z()) {
         const Eigen::Vector3d d = R * rc.cast<double>();
-        const Hit hit = cast(o, d, time);
+        const Hit hit = cast(o, d, vehicles);
         if (std::isfinite(hit.t) && hit.material != kSky) {
           intensity = shade(hit, o + hit.t * d, d);
           dep[u] = static_cast<float>(hit.t);

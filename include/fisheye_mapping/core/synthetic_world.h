@@ -91,6 +91,11 @@ class World {
 
   // First surface along the ray (o, unit d) at time t, up to max_range.
   Hit cast(const Eigen::Vector3d& o, const Eigen::Vector3d& d, double time, double max_range = 250.0) const;
+  // The same with the vehicles' poses at the time given (vehiclePoses(time)),
+  // for casting many rays at one instant.
+  std::vector<Eigen::Isometry3d> vehiclePoses(double time) const;
+  Hit cast(const Eigen::Vector3d& o, const Eigen::Vector3d& d, const std::vector<Eigen::Isometry3d>& vehicles,
+           double max_range = 250.0) const;
 
   struct Frame {
     cv::Mat image;  // CV_8UC1
