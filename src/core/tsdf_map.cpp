@@ -4,6 +4,8 @@
 
 #include <omp.h>
 
+#include <chrono>
+
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -145,6 +147,9 @@ IntegrationStats TsdfMap::integrate(const cv::Mat& depth, const CameraModel& cam
   if (config_.threads > 0) omp_set_num_threads(config_.threads);
 
   IntegrationStats stats;
+  using Clock = std::chrono::steady_clock;
+  auto ms_since = [](Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); };
+  const auto t_start = Clock::now();
   const int nthreads = omp_get_max_threads();
   local_center_ = vehicle_W + config_.local_map_offset;
   has_local_center_ = true;
@@ -219,6 +224,9 @@ IntegrationStats TsdfMap::integrate(const cv::Mat& depth, const CameraModel& cam
     work.emplace_back(b, it->second.get());
   }
 
+  stats.allocation_ms = ms_since(t_start);
+  const auto t_integrate = Clock::now();
+
   // 2. Integration of every voxel of the touched blocks.
   const FmCameraT<float> cam = camera.floatParams();
   const Eigen::Isometry3d T_C_W_d = T_W_C.inverse();
@@ -237,8 +245,12 @@ IntegrationStats TsdfMap::integrate(const cv::Mat& depth, const CameraModel& cam
     if (changed[n]) changed_.insert(work[n].first);
   }
 
+  stats.integration_ms = ms_since(t_integrate);
+
   // 3. Local map: swap out what the vehicle left behind.
+  const auto t_local = Clock::now();
   stats.blocks_swapped_out = moveLocalMap(vehicle_W);
+  stats.local_map_ms = ms_since(t_local);
   return stats;
 }
 

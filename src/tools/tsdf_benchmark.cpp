@@ -68,7 +68,7 @@ double peakMiB() {
 }
 
 struct Timing {
-  double mean_ms = 0, median_ms = 0;
+  double mean_ms = 0, median_ms = 0, allocation_ms = 0, integration_ms = 0;
   size_t valid_pixels = 0;
 };
 
@@ -82,6 +82,8 @@ Timing timeIntegration(fm::TsdfMap& map, const fm::CameraModel& cam, const std::
                                      Eigen::Vector3d(poses[i].translation().x(), poses[i].translation().y(), 0));
     ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
     t.valid_pixels += stats.valid_pixels;
+    t.allocation_ms += stats.allocation_ms / frames.size();
+    t.integration_ms += stats.integration_ms / frames.size();
   }
   t.valid_pixels /= frames.size();
   t.mean_ms = std::accumulate(ms.begin(), ms.end(), 0.0) / ms.size();
@@ -175,8 +177,8 @@ int main(int argc, char** argv) {
   {
     fm::TsdfMap map(cfg);
     const Timing t = timeIntegration(map, pinhole, frames, poses);
-    std::printf("ours pinhole: %.1f ms/frame (median %.1f), %zu valid pixels/frame, %zu blocks\n", t.mean_ms,
-                t.median_ms, t.valid_pixels, map.numBlocks());
+    std::printf("ours pinhole: %.1f ms/frame (median %.1f; allocation %.1f, integration %.1f), %zu valid pixels/frame, %zu blocks\n",
+                t.mean_ms, t.median_ms, t.allocation_ms, t.integration_ms, t.valid_pixels, map.numBlocks());
   }
   try {
     fm::TsdfConfig c = cfg;
@@ -190,8 +192,8 @@ int main(int argc, char** argv) {
   {
     fm::TsdfMap map(cfg);
     const Timing t = timeIntegration(map, fisheye, fisheye_frames, poses);
-    std::printf("ours fisheye: %.1f ms/frame (median %.1f), %zu valid pixels/frame, %zu blocks\n", t.mean_ms,
-                t.median_ms, t.valid_pixels, map.numBlocks());
+    std::printf("ours fisheye: %.1f ms/frame (median %.1f; allocation %.1f, integration %.1f), %zu valid pixels/frame, %zu blocks\n",
+                t.mean_ms, t.median_ms, t.allocation_ms, t.integration_ms, t.valid_pixels, map.numBlocks());
   }
   frames.clear();
   fisheye_frames.clear();

@@ -67,6 +67,9 @@ struct IntegrationStats {
   size_t blocks_allocated = 0;  // new blocks
   size_t blocks_swapped_in = 0;
   size_t blocks_swapped_out = 0;
+  double allocation_ms = 0;   // rays -> touched blocks, allocation, swap-in
+  double integration_ms = 0;  // voxel updates
+  double local_map_ms = 0;    // swap-out / swap-in as the box moves
 };
 
 class TsdfMap {
