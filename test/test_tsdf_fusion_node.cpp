@@ -136,6 +136,24 @@ TEST_F(TsdfFusionNode, FusesFramesAndServesTheMap) {
   }
   EXPECT_GT(triangles, 100u);
 
+  // A subscriber that arrives now gets the whole mesh at once: as many
+  // triangles as the mesh saved below, and a DELETEALL first.
+  // (Within one node a second subscription shares the first's connection:
+  // drop it so the new one connects afresh, as another node would.)
+  mesh_sub_.shutdown();
+  ros::WallDuration(0.5).sleep();
+  visualization_msgs::MarkerArrayConstPtr late;
+  ros::Subscriber late_sub = nh_.subscribe<visualization_msgs::MarkerArray>(
+      "mesh", 1, boost::function<void(const visualization_msgs::MarkerArrayConstPtr&)>([&late](const auto& m) {
+        if (!late) late = m;
+      }));
+  ASSERT_TRUE(waitFor([&late] { return late != nullptr; }, 10.0)) << "a late subscriber got no mesh";
+  size_t late_triangles = 0;
+  EXPECT_EQ(late->markers.front().action, visualization_msgs::Marker::DELETEALL);
+  for (const auto& m : late->markers) late_triangles += m.points.size() / 3;
+  EXPECT_GE(late_triangles, triangles);
+  late_sub.shutdown();
+
   // Services.
   char tmpl[] = "/tmp/fm_tsdf_node_XXXXXX";
   const std::string dir = mkdtemp(tmpl);

@@ -100,7 +100,10 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
                                                                                   : "tf never arrived",
                             dropped_no_tf_);
     });
-    mesh_pub_ = nh.advertise<visualization_msgs::MarkerArray>("mesh", 4, true);
+    // Only changed blocks go out on each update; a subscriber that connects
+    // later (rviz started mid-drive) is first sent the whole mesh.
+    mesh_pub_ = nh.advertise<visualization_msgs::MarkerArray>(
+        "mesh", 16, [this](const ros::SingleSubscriberPublisher& pub) { pub.publish(fullMesh()); });
     cloud_pub_ = nh.advertise<sensor_msgs::PointCloud2>("cloud", 2, true);
     services_.push_back(pnh.advertiseService("save_mesh", &TsdfFusionNodelet::saveMesh, this));
     services_.push_back(pnh.advertiseService("save_cloud", &TsdfFusionNodelet::saveCloud, this));
@@ -178,12 +181,27 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
       cleared_ = false;
     }
     for (const BlockIndex& b : changed) markers.markers.push_back(blockMarker(b, stamp));
-    if (mesh_pub_.getNumSubscribers() > 0 || mesh_pub_.isLatched()) mesh_pub_.publish(markers);
+    mesh_pub_.publish(markers);
     sensor_msgs::PointCloud2 cloud;
     pcl::toROSMsg(mesher_->surfaceCloud(), cloud);
     cloud.header.frame_id = world_frame_;
     cloud.header.stamp = stamp;
     cloud_pub_.publish(cloud);
+  }
+
+  visualization_msgs::MarkerArray fullMesh() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    visualization_msgs::MarkerArray markers;
+    if (!mesher_) return markers;
+    visualization_msgs::Marker del;
+    del.header.frame_id = world_frame_;
+    del.action = visualization_msgs::Marker::DELETEALL;
+    markers.markers.push_back(del);
+    const ros::Time stamp = last_stamp_.isZero() ? ros::Time::now() : last_stamp_;
+    for (const auto& kv : mesher_->blocks()) {
+      if (!kv.second.triangles.empty()) markers.markers.push_back(blockMarker(kv.first, stamp));
+    }
+    return markers;
   }
 
   visualization_msgs::Marker blockMarker(const BlockIndex& b, const ros::Time& stamp) const {
