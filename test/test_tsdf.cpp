@@ -236,11 +236,16 @@ Eigen::Isometry3d carCamera(double x) {
   return lookAt(Eigen::Vector3d(x, 0, 1.6), Eigen::Vector3d(x + 10, 0, 0.6));
 }
 
-TEST(TsdfMap, ActiveMemoryStaysBoundedOnALongDrive) {
+// 10 cm voxels and a 20 x 20 x 3 m local map: blocks leave it within metres.
+TsdfConfig smallLocalMap() {
   TsdfConfig cfg;
   cfg.voxel_size = 0.1;
   cfg.local_map_size = Eigen::Vector3d(20, 20, 3);
-  TsdfMap map(cfg);
+  return cfg;
+}
+
+TEST(TsdfMap, ActiveMemoryStaysBoundedOnALongDrive) {
+  TsdfMap map(smallLocalMap());
   const CameraModel cam = smallFisheye();
   const Scene s = street();
   // Blocks of 0.8 m: the box holds at most (20/0.8 + 1)^2 * (3/0.8 + 1) blocks.
@@ -279,9 +284,7 @@ std::map<std::tuple<int, int, int>, VoxelBlock> snapshot(const TsdfMap& map) {
 class TsdfSwap : public ::testing::TestWithParam<bool> {};
 
 TEST_P(TsdfSwap, SwapOutThenInIsBitIdentical) {
-  TsdfConfig cfg;
-  cfg.voxel_size = 0.1;
-  cfg.local_map_size = Eigen::Vector3d(20, 20, 3);
+  TsdfConfig cfg = smallLocalMap();
   const std::string dir = tempDir();
   if (GetParam()) cfg.swap_directory = dir + "/swap";
   TsdfMap map(cfg);
@@ -310,9 +313,7 @@ INSTANTIATE_TEST_SUITE_P(MemoryAndDisk, TsdfSwap, ::testing::Values(false, true)
                          [](const auto& info) { return info.param ? "disk" : "memory"; });
 
 TEST(TsdfMap, SaveThenLoadIsBitIdenticalAndBadFilesChangeNothing) {
-  TsdfConfig cfg;
-  cfg.voxel_size = 0.1;
-  cfg.local_map_size = Eigen::Vector3d(20, 20, 3);
+  const TsdfConfig cfg = smallLocalMap();
   TsdfMap map(cfg);
   const CameraModel cam = smallFisheye();
   const Scene s = street();
