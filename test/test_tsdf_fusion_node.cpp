@@ -3,7 +3,6 @@
 // true surfaces; bad frames are skipped; the services save, load and clear.
 #include <sys/stat.h>
 
-#include <atomic>
 #include <fstream>
 
 #include <cv_bridge/cv_bridge.h>
@@ -35,7 +34,6 @@ fm::analytic::Scene scene() {
 
 sensor_msgs::PointCloud2ConstPtr last_cloud;
 visualization_msgs::MarkerArrayConstPtr last_mesh;
-std::atomic<int> clouds{0}, meshes{0};
 
 bool waitFor(const std::function<bool()>& done, double seconds) {
   const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(seconds);
@@ -55,7 +53,6 @@ class TsdfFusionNode : public ::testing::Test {
     cloud_sub_ = nh_.subscribe<sensor_msgs::PointCloud2>(
         "cloud", 2, boost::function<void(const sensor_msgs::PointCloud2ConstPtr&)>([](const auto& m) {
           last_cloud = m;
-          ++clouds;
         }));
     mesh_sub_ = nh_.subscribe<visualization_msgs::MarkerArray>(
         "mesh", 20, boost::function<void(const visualization_msgs::MarkerArrayConstPtr&)>([](const auto& m) {
@@ -65,7 +62,6 @@ class TsdfFusionNode : public ::testing::Test {
               break;
             }
           }
-          ++meshes;
         }));
     ASSERT_TRUE(waitFor([this] { return depth_pub_.getNumSubscribers() > 0; }, 30.0)) << "TsdfFusion never subscribed";
   }

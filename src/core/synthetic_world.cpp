@@ -372,7 +372,7 @@ Hit World::cast(const Eigen::Vector3d& o, const Eigen::Vector3d& d, const std::v
   return best;
 }
 
-float World::shade(const Hit& h, const Eigen::Vector3d& p, const Eigen::Vector3d& d) const {
+float World::shade(const Hit& h, const Eigen::Vector3d& p) const {
   const uint32_t seed = config_.seed * 31u;
   float albedo = h.albedo;
   switch (h.material) {
@@ -431,7 +431,6 @@ float World::shade(const Hit& h, const Eigen::Vector3d& p, const Eigen::Vector3d
   }
   static const Eigen::Vector3d sun = Eigen::Vector3d(0.45, 0.3, 0.84).normalized();
   const double lambert = std::max(0.0, h.n.dot(sun));
-  (void)d;
   return static_cast<float>(std::clamp(albedo, 0.0f, 1.0f) * (0.45 + 0.55 * lambert));
 }
 
@@ -462,7 +461,7 @@ World::Frame World::render(const CameraModel& camera, const std::vector<Eigen::V
         const Eigen::Vector3d d = R * rc.cast<double>();
         const Hit hit = cast(o, d, vehicles);
         if (std::isfinite(hit.t) && hit.material != kSky) {
-          intensity = shade(hit, o + hit.t * d, d);
+          intensity = shade(hit, o + hit.t * d);
           dep[u] = static_cast<float>(hit.t);
           ids[u] = static_cast<int16_t>(hit.object);
         } else {

@@ -377,12 +377,8 @@ void TsdfMap::load(const std::string& path) {
   clear();
   for (auto& kv : loaded) {
     changed_.insert(kv.first);
-    if (insideLocalMap(kv.first)) {
-      active_[kv.first] = std::move(kv.second);
-    } else {
-      active_[kv.first] = std::move(kv.second);
-      swapOut(kv.first);
-    }
+    active_[kv.first] = std::move(kv.second);
+    if (!insideLocalMap(kv.first)) swapOut(kv.first);
   }
 }
 

@@ -198,7 +198,5 @@ int main(int argc, char** argv) {
   frames.clear();
   fisheye_frames.clear();
   std::printf("ours peak RSS: %.0f MiB\n", peakMiB());
-
-  std::filesystem::remove_all(out + "/swap");
   return 0;
 }

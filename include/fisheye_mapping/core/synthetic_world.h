@@ -129,7 +129,7 @@ class World {
   void addStreetSide(const Eigen::Vector2d& a, const Eigen::Vector2d& b, const Eigen::Vector2d& left, uint64_t key);
   void indexGrid();
   Eigen::Vector3d routePoint(double s, Eigen::Vector2d* tangent) const;
-  float shade(const Hit& h, const Eigen::Vector3d& p, const Eigen::Vector3d& d) const;
+  float shade(const Hit& h, const Eigen::Vector3d& p) const;
 
   WorldConfig config_;
   std::vector<Eigen::Vector2d> waypoints_;  // route corners
