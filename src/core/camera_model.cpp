@@ -213,6 +213,33 @@ double CameraModel::maxValidAngle() const {
   return M_PI;
 }
 
+CameraModel CameraModel::scaled(double scale, int width, int height) const {
+  if (!(scale > 0.0) || width <= 0 || height <= 0) {
+    throw std::invalid_argument("scaled camera: scale and size must be positive");
+  }
+  CameraModel c = *this;
+  c.params_.fx *= scale;
+  c.params_.fy *= scale;
+  c.params_.skew *= scale;
+  c.params_.cx = (params_.cx + 0.5) * scale - 0.5;
+  c.params_.cy = (params_.cy + 0.5) * scale - 0.5;
+  c.params_.width = width;
+  c.params_.height = height;
+  return c;
+}
+
+CameraModel CameraModel::cropped(int x0, int y0, int width, int height) const {
+  if (width <= 0 || height <= 0) {
+    throw std::invalid_argument("cropped camera: size must be positive");
+  }
+  CameraModel c = *this;
+  c.params_.cx -= x0;
+  c.params_.cy -= y0;
+  c.params_.width = width;
+  c.params_.height = height;
+  return c;
+}
+
 std::vector<Eigen::Vector3f> pixelRays(const CameraModel& camera) {
   const int w = camera.width(), h = camera.height();
   std::vector<Eigen::Vector3f> rays(static_cast<size_t>(w) * h);

@@ -67,6 +67,13 @@ class CameraModel {
   // (radians); may exceed pi/2.
   double maxValidAngle() const;
 
+  // The same camera for an image resampled by `scale` (0.5: half resolution,
+  // pixel centres kept consistent: c' = (c + 0.5) * scale - 0.5) to
+  // width x height pixels.
+  CameraModel scaled(double scale, int width, int height) const;
+  // The same camera for the crop of width x height pixels at (x0, y0).
+  CameraModel cropped(int x0, int y0, int width, int height) const;
+
   const FmCameraT<double>& params() const { return params_; }
   // The same parameters in single precision, laid out as the OpenCL struct.
   FmCameraT<float> floatParams() const;

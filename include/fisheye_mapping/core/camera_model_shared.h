@@ -37,6 +37,11 @@
 #define FM_GLOBAL __global
 #define FM_CAM struct FmCameraT
 #define FM_CAM_FLOAT struct FmCameraT
+/* Address space of camera parameter pointers: private by default; a program
+ * may build with -DFM_CAM_SPACE=__global to read the parameters in place. */
+#ifndef FM_CAM_SPACE
+#define FM_CAM_SPACE
+#endif
 #define FM_SQRT(x) sqrt(x)
 #define FM_ATAN2(y, x) atan2(y, x)
 #define FM_SIN(x) sin(x)
@@ -51,6 +56,7 @@ typedef float fm_real;
 #define FM_GLOBAL
 #define FM_CAM FmCameraT<fm_real>
 #define FM_CAM_FLOAT FmCameraT<float> /* for functions that exist in float only */
+#define FM_CAM_SPACE
 #define FM_SQRT(x) std::sqrt(x)
 #define FM_ATAN2(y, x) std::atan2(y, x)
 #define FM_SIN(x) std::sin(x)
@@ -63,6 +69,16 @@ namespace fisheye_mapping {
 #define FM_MODEL_UNIFIED 1
 #define FM_MODEL_DOUBLE_SPHERE 2
 #define FM_MODEL_KANNALA_BRANDT 3
+
+/* A program built for one camera model only (-DFM_FIXED_MODEL=FM_MODEL_...)
+ * folds the model dispatch away at compile time: straight-line code that
+ * vectorizers (PoCL's across work items) can handle. The cameras passed in
+ * must then all be of that model. */
+#ifdef FM_FIXED_MODEL
+#define FM_IS_MODEL(cam, m) (FM_FIXED_MODEL == (m))
+#else
+#define FM_IS_MODEL(cam, m) ((cam)->model == (m))
+#endif
 
 /* Newton iterations used to invert distortions, and the residual (in
  * normalized units) under which an inversion counts as converged. */
@@ -90,7 +106,7 @@ typedef struct FmCameraT FmCamera;
 #endif
 
 /* Radial-tangential distortion of the normalized point (x, y). */
-FM_T_DECL FM_FN void fm_radtan_distort(const FM_CAM* cam, fm_real x, fm_real y,
+FM_T_DECL FM_FN void fm_radtan_distort(const FM_CAM_SPACE FM_CAM* cam, fm_real x, fm_real y,
                                        fm_real* xd, fm_real* yd) {
   fm_real r2 = x * x + y * y;
   fm_real radial = 1.0f + r2 * (cam->k1 + r2 * cam->k2);
@@ -100,7 +116,7 @@ FM_T_DECL FM_FN void fm_radtan_distort(const FM_CAM* cam, fm_real x, fm_real y,
 
 /* Inverts fm_radtan_distort by Newton's method on the 2x2 Jacobian.
  * Returns 1 when the residual falls under FM_NEWTON_TOLERANCE. */
-FM_T_DECL FM_FN int fm_radtan_undistort(const FM_CAM* cam, fm_real xd, fm_real yd,
+FM_T_DECL FM_FN int fm_radtan_undistort(const FM_CAM_SPACE FM_CAM* cam, fm_real xd, fm_real yd,
                                         fm_real* x_out, fm_real* y_out) {
   fm_real x = xd;
   fm_real y = yd;
@@ -140,39 +156,39 @@ FM_T_DECL FM_FN int fm_radtan_undistort(const FM_CAM* cam, fm_real xd, fm_real y
 }
 
 /* Kannala-Brandt: theta_d as a function of theta, and its derivative. */
-FM_T_DECL FM_FN fm_real fm_kb_theta_d(const FM_CAM* cam, fm_real theta) {
+FM_T_DECL FM_FN fm_real fm_kb_theta_d(const FM_CAM_SPACE FM_CAM* cam, fm_real theta) {
   fm_real t2 = theta * theta;
   return theta * (1.0f + t2 * (cam->k1 + t2 * (cam->k2 + t2 * (cam->k3 + t2 * cam->k4))));
 }
 
-FM_T_DECL FM_FN fm_real fm_kb_dtheta_d(const FM_CAM* cam, fm_real theta) {
+FM_T_DECL FM_FN fm_real fm_kb_dtheta_d(const FM_CAM_SPACE FM_CAM* cam, fm_real theta) {
   fm_real t2 = theta * theta;
   return 1.0f + t2 * (3.0f * cam->k1 + t2 * (5.0f * cam->k2 + t2 * (7.0f * cam->k3 + t2 * 9.0f * cam->k4)));
 }
 
 /* Normalized (distorted) point -> pixel. */
-FM_T_DECL FM_FN void fm_to_pixel(const FM_CAM* cam, fm_real mx, fm_real my, fm_real* u,
+FM_T_DECL FM_FN void fm_to_pixel(const FM_CAM_SPACE FM_CAM* cam, fm_real mx, fm_real my, fm_real* u,
                                  fm_real* v) {
   *u = cam->fx * mx + cam->skew * my + cam->cx;
   *v = cam->fy * my + cam->cy;
 }
 
 /* Pixel -> normalized (distorted) point. */
-FM_T_DECL FM_FN void fm_from_pixel(const FM_CAM* cam, fm_real u, fm_real v, fm_real* mx,
+FM_T_DECL FM_FN void fm_from_pixel(const FM_CAM_SPACE FM_CAM* cam, fm_real u, fm_real v, fm_real* mx,
                                    fm_real* my) {
   *my = (v - cam->cy) / cam->fy;
   *mx = (u - cam->cx - cam->skew * (*my)) / cam->fx;
 }
 
 /* Projects the point (x, y, z) given in the camera frame. */
-FM_T_DECL FM_FN int fm_project(const FM_CAM* cam, fm_real x, fm_real y, fm_real z, fm_real* u,
+FM_T_DECL FM_FN int fm_project(const FM_CAM_SPACE FM_CAM* cam, fm_real x, fm_real y, fm_real z, fm_real* u,
                                fm_real* v) {
   fm_real mx = 0.0f;
   fm_real my = 0.0f;
   int valid = 1;
-  if (cam->model == FM_MODEL_PINHOLE || cam->model == FM_MODEL_UNIFIED) {
+  if (FM_IS_MODEL(cam, FM_MODEL_PINHOLE) || FM_IS_MODEL(cam, FM_MODEL_UNIFIED)) {
     fm_real denom;
-    if (cam->model == FM_MODEL_PINHOLE) {
+    if (FM_IS_MODEL(cam, FM_MODEL_PINHOLE)) {
       valid = z > 0.0f;
       denom = z;
     } else {
@@ -188,7 +204,7 @@ FM_T_DECL FM_FN int fm_project(const FM_CAM* cam, fm_real x, fm_real y, fm_real 
     fm_real ny = y / denom;
     valid = valid && (nx * nx + ny * ny) <= cam->max_r2;
     fm_radtan_distort(cam, nx, ny, &mx, &my);
-  } else if (cam->model == FM_MODEL_DOUBLE_SPHERE) {
+  } else if (FM_IS_MODEL(cam, FM_MODEL_DOUBLE_SPHERE)) {
     fm_real d1 = FM_SQRT(x * x + y * y + z * z);
     fm_real alpha = cam->alpha;
     fm_real w1 = alpha <= 0.5f ? alpha / (1.0f - alpha) : (1.0f - alpha) / alpha;
@@ -203,7 +219,7 @@ FM_T_DECL FM_FN int fm_project(const FM_CAM* cam, fm_real x, fm_real y, fm_real 
     }
     mx = x / norm;
     my = y / norm;
-  } else if (cam->model == FM_MODEL_KANNALA_BRANDT) {
+  } else if (FM_IS_MODEL(cam, FM_MODEL_KANNALA_BRANDT)) {
     fm_real r = FM_SQRT(x * x + y * y);
     fm_real theta = FM_ATAN2(r, z);
     valid = theta <= cam->max_theta && (r > 0.0f || z > 0.0f);
@@ -220,7 +236,7 @@ FM_T_DECL FM_FN int fm_project(const FM_CAM* cam, fm_real x, fm_real y, fm_real 
 }
 
 /* Unprojects the pixel (u, v) to a unit ray (rx, ry, rz) in the camera frame. */
-FM_T_DECL FM_FN int fm_unproject(const FM_CAM* cam, fm_real u, fm_real v, fm_real* rx,
+FM_T_DECL FM_FN int fm_unproject(const FM_CAM_SPACE FM_CAM* cam, fm_real u, fm_real v, fm_real* rx,
                                  fm_real* ry, fm_real* rz) {
   fm_real mx, my;
   fm_from_pixel(cam, u, v, &mx, &my);
@@ -228,12 +244,12 @@ FM_T_DECL FM_FN int fm_unproject(const FM_CAM* cam, fm_real u, fm_real v, fm_rea
   fm_real y = 0.0f;
   fm_real z = 1.0f;
   int valid = 1;
-  if (cam->model == FM_MODEL_PINHOLE || cam->model == FM_MODEL_UNIFIED) {
+  if (FM_IS_MODEL(cam, FM_MODEL_PINHOLE) || FM_IS_MODEL(cam, FM_MODEL_UNIFIED)) {
     fm_real nx, ny;
     valid = fm_radtan_undistort(cam, mx, my, &nx, &ny);
     fm_real r2 = nx * nx + ny * ny;
     valid = valid && r2 <= cam->max_r2;
-    if (cam->model == FM_MODEL_PINHOLE) {
+    if (FM_IS_MODEL(cam, FM_MODEL_PINHOLE)) {
       x = nx;
       y = ny;
       z = 1.0f;
@@ -249,7 +265,7 @@ FM_T_DECL FM_FN int fm_unproject(const FM_CAM* cam, fm_real u, fm_real v, fm_rea
       y = factor * ny;
       z = factor - xi;
     }
-  } else if (cam->model == FM_MODEL_DOUBLE_SPHERE) {
+  } else if (FM_IS_MODEL(cam, FM_MODEL_DOUBLE_SPHERE)) {
     fm_real alpha = cam->alpha;
     fm_real xi = cam->xi;
     fm_real r2 = mx * mx + my * my;
@@ -268,7 +284,7 @@ FM_T_DECL FM_FN int fm_unproject(const FM_CAM* cam, fm_real u, fm_real v, fm_rea
     x = k * mx;
     y = k * my;
     z = k * mz - xi;
-  } else if (cam->model == FM_MODEL_KANNALA_BRANDT) {
+  } else if (FM_IS_MODEL(cam, FM_MODEL_KANNALA_BRANDT)) {
     fm_real theta_d = FM_SQRT(mx * mx + my * my);
     if (theta_d > 0.0f) {
       fm_real theta = theta_d;
@@ -307,7 +323,7 @@ FM_T_DECL FM_FN int fm_unproject(const FM_CAM* cam, fm_real u, fm_real v, fm_rea
 
 /* 1 iff the pixel lies inside the image, at least `margin` pixels from the
  * border of the area covered by pixel centres [0, width-1] x [0, height-1]. */
-FM_T_DECL FM_FN int fm_in_image(const FM_CAM* cam, fm_real u, fm_real v, fm_real margin) {
+FM_T_DECL FM_FN int fm_in_image(const FM_CAM_SPACE FM_CAM* cam, fm_real u, fm_real v, fm_real margin) {
   return u >= margin && v >= margin && u <= (fm_real)(cam->width - 1) - margin &&
          v <= (fm_real)(cam->height - 1) - margin;
 }

@@ -1,0 +1,121 @@
+/*
+ * Plane-sweep stereo kernels (OpenCL C 1.2). Built after camera_model_shared.h
+ * and plane_sweep_shared.h, whose functions they call; the C++ reference
+ * sweep (plane_sweep_cpu.cpp) calls the same functions.
+ *
+ * Per plane: sweep_warp samples every supporting view at the plane's point of
+ * each reference pixel; sweep_cost turns those samples into one aggregated
+ * ZNCC cost per pixel in the cost volume. Once per frame, sweep_select picks
+ * the best plane of each pixel.
+ *
+ * Global sizes are exactly the image (no bounds checks).
+ *
+ * Built with -DFM_CAM_SPACE=__global (camera parameters read in place) and
+ * -DFM_SWEEP_VIEWS=N (the number of supporting views) and
+ * -DFM_SWEEP_RADIUS=R (window radius) so that every loop has a compile-time
+ * trip count and unrolls, and the sums stay in registers.
+ */
+#if !defined(FM_SWEEP_VIEWS) || !defined(FM_SWEEP_RADIUS)
+#error "build with -DFM_SWEEP_VIEWS=<supporting views> -DFM_SWEEP_RADIUS=<window radius>"
+#endif
+
+/* warped[v * npix + pix]: intensity of view v at the plane point of ref pixel
+ * pix, -1 where unusable. A zero ray marks a reference pixel that is masked
+ * or outside the model's domain; self-masked pixels of the views' images hold
+ * -1. */
+__kernel void sweep_warp(__global const float* restrict rays, int npix, __global const FmSweepPlane* restrict planes,
+                         int plane, __global const FmCamera* restrict cams, __global const FmViewPose* restrict poses,
+                         int views, __global const float* restrict images, __global const int* restrict offsets,
+                         __global float* restrict warped) {
+  int pix = get_global_id(0);
+  float rx = rays[3 * pix], ry = rays[3 * pix + 1], rz = rays[3 * pix + 2];
+  float t = fm_plane_range(planes[plane], rx, ry, rz);
+  int hit = t > 0.0f;
+  t = hit ? t : 1.0f;
+  for (int v = 0; v < FM_SWEEP_VIEWS; ++v) {
+    float w = fm_warp_sample(&cams[v], &poses[v], images + offsets[v], t * rx, t * ry, t * rz);
+    warped[v * npix + pix] = hit ? w : -1.0f;
+  }
+}
+
+/* Adds (sign +1) or removes (sign -1) row y of the window sums of column x. */
+inline void sweep_row(__global const float* restrict warped, __global const float* restrict ref, int npix,
+                      int width, int height, int x, int y, float sign, float* sw, float* sww, float* swr,
+                      float* sv) {
+  if (y < 0 || y >= height) {
+    return;
+  }
+  int row = y * width;
+  for (int dx = -FM_SWEEP_RADIUS; dx <= FM_SWEEP_RADIUS; ++dx) {
+    int i = row + x + dx;
+    float r = ref[i];
+    for (int v = 0; v < FM_SWEEP_VIEWS; ++v) {
+      float w = warped[v * npix + i];
+      int ok = w >= 0.0f;
+      w = ok ? sign * w : 0.0f;
+      sw[v] += w;
+      sww[v] += sign * w * w;
+      swr[v] += w * r;
+      sv[v] += ok ? sign : 0.0f;
+    }
+  }
+}
+
+/* One work item per column x and band of `band` rows: running window sums
+ * down the band (add the row entering the window, remove the one leaving),
+ * so each output costs two window rows rather than a whole window. The
+ * costs of the supporting views are aggregated into the cost volume's slice
+ * for `plane`. */
+__kernel void sweep_cost(__global const float* restrict warped, __global const float* restrict ref,
+                         __global const float* restrict ref_mean, __global const float* restrict ref_std,
+                         int width, int height, int band, int mode, int k, int plane,
+                         __global float* restrict volume) {
+  int x = get_global_id(0);
+  int y0 = get_global_id(1) * band;
+  int y1 = y0 + band < height ? y0 + band : height;
+  int npix = width * height;
+  __global float* out = volume + (size_t)plane * (size_t)npix;
+  if (x < FM_SWEEP_RADIUS || x >= width - FM_SWEEP_RADIUS) {
+    for (int y = y0; y < y1; ++y) {
+      out[y * width + x] = FM_COST_INVALID;
+    }
+    return;
+  }
+  float sw[FM_SWEEP_VIEWS], sww[FM_SWEEP_VIEWS], swr[FM_SWEEP_VIEWS], sv[FM_SWEEP_VIEWS],
+      costs[FM_SWEEP_VIEWS];
+  for (int v = 0; v < FM_SWEEP_VIEWS; ++v) {
+    sw[v] = sww[v] = swr[v] = sv[v] = 0.0f;
+  }
+  for (int y = y0 - FM_SWEEP_RADIUS; y < y0 + FM_SWEEP_RADIUS; ++y) {
+    sweep_row(warped, ref, npix, width, height, x, y, 1.0f, sw, sww, swr, sv);
+  }
+  const float n = (float)((2 * FM_SWEEP_RADIUS + 1) * (2 * FM_SWEEP_RADIUS + 1));
+  for (int y = y0; y < y1; ++y) {
+    sweep_row(warped, ref, npix, width, height, x, y + FM_SWEEP_RADIUS, 1.0f, sw, sww, swr, sv);
+    int i = y * width + x;
+    float mean_r = ref_mean[i], std_r = ref_std[i];
+    for (int v = 0; v < FM_SWEEP_VIEWS; ++v) {
+      costs[v] = sv[v] == n ? fm_zncc_cost(n, sw[v], sww[v], swr[v], mean_r, std_r) : FM_COST_INVALID;
+    }
+    out[i] = fm_aggregate(costs, FM_SWEEP_VIEWS, mode, k);
+    sweep_row(warped, ref, npix, width, height, x, y - FM_SWEEP_RADIUS, -1.0f, sw, sww, swr, sv);
+  }
+}
+
+/* Best plane of every pixel: range (NaN if none), best cost, uniqueness ratio. */
+__kernel void sweep_select(__global const float* restrict volume, int npix, __global const FmSweepPlane* restrict planes,
+                           int n_planes, __global const float* restrict rays, int subpixel,
+                           __global float* restrict range, __global float* restrict cost, __global float* restrict ratio) {
+  int pix = get_global_id(0);
+  float t, c, q;
+  if (fm_select_plane(volume + pix, npix, planes, n_planes, rays[3 * pix], rays[3 * pix + 1],
+                      rays[3 * pix + 2], subpixel, &t, &c, &q)) {
+    range[pix] = t;
+    cost[pix] = c;
+    ratio[pix] = q;
+  } else {
+    range[pix] = NAN;
+    cost[pix] = NAN;
+    ratio[pix] = NAN;
+  }
+}

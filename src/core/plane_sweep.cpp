@@ -1,0 +1,425 @@
+#include "fisheye_mapping/core/plane_sweep.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <sstream>
+#include <stdexcept>
+
+#include <opencv2/imgproc.hpp>
+
+namespace fisheye_mapping {
+namespace {
+
+double msSince(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+void require(bool ok, const std::string& field, const std::string& what) {
+  if (!ok) throw std::invalid_argument(field + ": " + what);
+}
+
+FmViewPose toViewPose(const Eigen::Isometry3d& T_view_ref) {
+  FmViewPose p{};
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) p.r[3 * r + c] = static_cast<float>(T_view_ref.linear()(r, c));
+    p.t[r] = static_cast<float>(T_view_ref.translation()[r]);
+  }
+  return p;
+}
+
+// Nearest-neighbour upsampling of a half-resolution map to width x height.
+cv::Mat upsampleNearest(const cv::Mat& half, int width, int height) {
+  cv::Mat out(height, width, CV_32FC1, cv::Scalar(NAN));
+  for (int v = 0; v < height; ++v) {
+    const int hv = std::min(v / 2, half.rows - 1);
+    const float* src = half.ptr<float>(hv);
+    float* dst = out.ptr<float>(v);
+    for (int u = 0; u < width; ++u) dst[u] = src[std::min(u / 2, half.cols - 1)];
+  }
+  return out;
+}
+
+cv::Mat checkedMask(const SweepView& view) {
+  if (view.mask.empty()) return cv::Mat::zeros(view.camera.height(), view.camera.width(), CV_8UC1);
+  if (view.mask.type() != CV_8UC1) {
+    throw std::invalid_argument(view.name + ": self-mask must be an 8-bit single-channel image");
+  }
+  if (view.mask.cols != view.camera.width() || view.mask.rows != view.camera.height()) {
+    std::ostringstream os;
+    os << view.name << ": self-mask is " << view.mask.cols << "x" << view.mask.rows << ", calibration says "
+       << view.camera.width() << "x" << view.camera.height();
+    throw std::invalid_argument(os.str());
+  }
+  return view.mask;
+}
+
+void checkImage(const SweepView& view) {
+  if (view.image.empty()) throw std::invalid_argument(view.name + ": empty image");
+  if (view.image.cols != view.camera.width() || view.image.rows != view.camera.height()) {
+    std::ostringstream os;
+    os << view.name << ": image is " << view.image.cols << "x" << view.image.rows << ", calibration says "
+       << view.camera.width() << "x" << view.camera.height();
+    throw std::invalid_argument(os.str());
+  }
+}
+
+// Window mean and standard deviation of a float image.
+void windowStats(const cv::Mat& img, int radius, cv::Mat* mean, cv::Mat* stddev) {
+  const cv::Size k(2 * radius + 1, 2 * radius + 1);
+  cv::Mat sq;
+  cv::boxFilter(img, *mean, CV_32F, k, cv::Point(-1, -1), true, cv::BORDER_REPLICATE);
+  cv::boxFilter(img.mul(img), sq, CV_32F, k, cv::Point(-1, -1), true, cv::BORDER_REPLICATE);
+  *stddev = sq - mean->mul(*mean);
+  cv::max(*stddev, 0.0, *stddev);
+  cv::sqrt(*stddev, *stddev);
+}
+
+}  // namespace
+
+void DepthFilterConfig::validate() const {
+  require(alpha_upper >= 0 && alpha_upper <= 1, "filters.alpha_upper", "must be in [0, 1]");
+  require(alpha_lower >= 0 && alpha_lower <= 1, "filters.alpha_lower", "must be in [0, 1]");
+  require(split_row >= 0 && split_row <= 1, "filters.split_row", "must be in [0, 1]");
+  require(max_ratio > 0 && max_ratio <= 1, "filters.max_ratio", "must be in (0, 1]");
+  require(consistency_window >= 3 && consistency_window % 2 == 1, "filters.consistency_window",
+          "must be odd and >= 3");
+  require(gamma > 0, "filters.gamma", "must be positive");
+  require(delta >= 0 && delta <= 1, "filters.delta", "must be in [0, 1]");
+}
+
+void PlaneSweepConfig::validate() const {
+  require(fronto_planes >= 2, "fronto_planes", "must be at least 2");
+  require(ground_planes == 0 || ground_planes >= 2, "ground_planes", "must be 0 or at least 2");
+  require(std::isfinite(near) && near > 0, "near", "must be positive");
+  require(std::isfinite(far) && far > near, "far", "must be greater than near");
+  require(std::isfinite(ground_min) && std::isfinite(ground_max) && ground_max > ground_min, "ground_max",
+          "must be greater than ground_min");
+  require(window_full >= 3 && window_full % 2 == 1, "window_full", "must be odd and >= 3");
+  require(window_half >= 3 && window_half % 2 == 1, "window_half", "must be odd and >= 3");
+  require(aggregation == "average" || aggregation == "best_k", "aggregation",
+          "must be 'average' or 'best_k', got '" + aggregation + "'");
+  require(best_k >= 1, "best_k", "must be at least 1");
+  require(resolution == "full" || resolution == "half" || resolution == "multiscale", "resolution",
+          "must be 'full', 'half' or 'multiscale', got '" + resolution + "'");
+  require(crop_width > 0 && crop_width <= 1, "crop_width", "must be in (0, 1]");
+  require(crop_height > 0 && crop_height <= 1, "crop_height", "must be in (0, 1]");
+  require(min_parallax_px >= 0, "min_parallax_px", "must be >= 0");
+  require(min_overlap >= 0 && min_overlap <= 1, "min_overlap", "must be in [0, 1]");
+  require(backend == "opencl" || backend == "cpu", "backend", "must be 'opencl' or 'cpu', got '" + backend + "'");
+  require(band_rows >= 1, "band_rows", "must be at least 1");
+  filters.validate();
+}
+
+std::vector<FmSweepPlane> makeSweepPlanes(const PlaneSweepConfig& config, const Eigen::Isometry3d* T_base_ref) {
+  std::vector<FmSweepPlane> planes;
+  // Fronto-parallel: uniform in inverse depth, near to far.
+  const double inv_near = 1.0 / config.near, inv_far = 1.0 / config.far;
+  for (int i = 0; i < config.fronto_planes; ++i) {
+    const double s = inv_near + (inv_far - inv_near) * i / (config.fronto_planes - 1);
+    FmSweepPlane p{};
+    p.nx = 0.0f;
+    p.ny = 0.0f;
+    p.nz = 1.0f;
+    p.d = static_cast<float>(1.0 / s);
+    p.family = FM_FAMILY_FRONTO;
+    planes.push_back(p);
+  }
+  if (T_base_ref && config.ground_planes > 0) {
+    // Plane z_base = h: e_z . (R X_ref + t) = h, i.e. n . X_ref = d with
+    // n = -R^T e_z (pointing down, towards the ground) and d = t_z - h.
+    const Eigen::Vector3d n = -(T_base_ref->linear().transpose() * Eigen::Vector3d::UnitZ());
+    const double tz = T_base_ref->translation().z();
+    for (int i = 0; i < config.ground_planes; ++i) {
+      const double h = config.ground_min + (config.ground_max - config.ground_min) * i / (config.ground_planes - 1);
+      const double d = tz - h;
+      if (!(d > 0.0)) continue;  // plane at or above the camera: never seen from above
+      FmSweepPlane p{};
+      p.nx = static_cast<float>(n.x());
+      p.ny = static_cast<float>(n.y());
+      p.nz = static_cast<float>(n.z());
+      p.d = static_cast<float>(d);
+      p.family = FM_FAMILY_GROUND;
+      planes.push_back(p);
+    }
+  }
+  return planes;
+}
+
+cv::Mat toSweepImage(const cv::Mat& image, const std::string& what) {
+  cv::Mat grey;
+  switch (image.type()) {
+    case CV_8UC1:
+      image.convertTo(grey, CV_32F, 1.0 / 255.0);
+      break;
+    case CV_8UC3:
+      cv::cvtColor(image, grey, cv::COLOR_BGR2GRAY);
+      grey.convertTo(grey, CV_32F, 1.0 / 255.0);
+      break;
+    case CV_8UC4:
+      cv::cvtColor(image, grey, cv::COLOR_BGRA2GRAY);
+      grey.convertTo(grey, CV_32F, 1.0 / 255.0);
+      break;
+    case CV_16UC1:
+      image.convertTo(grey, CV_32F, 1.0 / 65535.0);
+      break;
+    case CV_32FC1:
+      grey = image.clone();
+      cv::patchNaNs(grey, 0.0);
+      break;
+    default:
+      throw std::invalid_argument(what + ": unsupported image type (expected 8-bit grey/BGR/BGRA, 16-bit grey or float)");
+  }
+  return grey;
+}
+
+cv::Mat applyDepthFilters(const DepthFilterConfig& config, const cv::Mat& raw, const cv::Mat& cost,
+                          const cv::Mat& ratio) {
+  cv::Mat depth = raw.clone();
+  const int w = raw.cols, h = raw.rows;
+  const int split = static_cast<int>(std::lround(config.split_row * h));
+  for (int v = 0; v < h; ++v) {
+    float* d = depth.ptr<float>(v);
+    const float* c = cost.ptr<float>(v);
+    const float* q = ratio.ptr<float>(v);
+    const float alpha = static_cast<float>(v < split ? config.alpha_upper : config.alpha_lower);
+    for (int u = 0; u < w; ++u) {
+      if (config.cost && !(c[u] <= alpha)) d[u] = NAN;
+      if (config.uniqueness && !(q[u] <= config.max_ratio)) d[u] = NAN;
+    }
+  }
+  if (!config.consistency) return depth;
+  const cv::Mat in = depth.clone();
+  const int r = config.consistency_window / 2;
+  const int others = config.consistency_window * config.consistency_window - 1;
+  const float gamma = static_cast<float>(config.gamma);
+#pragma omp parallel for schedule(static)
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      const float d = in.at<float>(v, u);
+      if (!std::isfinite(d)) continue;
+      int consistent = 0;
+      for (int y = std::max(0, v - r); y <= std::min(h - 1, v + r); ++y) {
+        const float* row = in.ptr<float>(y);
+        for (int x = std::max(0, u - r); x <= std::min(w - 1, u + r); ++x) {
+          if ((x != u || y != v) && std::fabs(row[x] - d) < gamma) ++consistent;  // NaN compares false
+        }
+      }
+      if (consistent < config.delta * others) depth.at<float>(v, u) = NAN;
+    }
+  }
+  return depth;
+}
+
+std::vector<int> selectSupportViews(const PlaneSweepConfig& config, const CameraModel& ref,
+                                    const std::vector<SweepView>& views, std::vector<std::string>* reasons) {
+  // Reference pixels on a coarse grid.
+  std::vector<Eigen::Vector3d> rays;
+  for (int gy = 1; gy < 12; ++gy) {
+    for (int gx = 1; gx < 16; ++gx) {
+      Eigen::Vector3d ray;
+      if (ref.unproject(Eigen::Vector2d(ref.width() * gx / 16.0, ref.height() * gy / 12.0), &ray) && ray.z() > 0.1) {
+        rays.push_back(ray);
+      }
+    }
+  }
+  const double mid = std::sqrt(config.near * config.far);
+  std::vector<int> keep;
+  for (size_t i = 0; i < views.size(); ++i) {
+    const SweepView& view = views[i];
+    const Eigen::Isometry3d T_view_ref = view.T_ref_view.inverse();
+    std::vector<double> parallax;
+    int seen = 0;
+    for (const auto& ray : rays) {
+      Eigen::Vector2d a, b, m;
+      // Fronto-parallel planes: z-depth near / far / mid along the ray.
+      const bool pa = view.camera.project(T_view_ref * (ray * (config.near / ray.z())), &a) && view.camera.isInImage(a);
+      const bool pb = view.camera.project(T_view_ref * (ray * (config.far / ray.z())), &b) && view.camera.isInImage(b);
+      if (view.camera.project(T_view_ref * (ray * (mid / ray.z())), &m) && view.camera.isInImage(m)) ++seen;
+      if (pa && pb) parallax.push_back((a - b).norm());
+    }
+    const double overlap = rays.empty() ? 0.0 : static_cast<double>(seen) / rays.size();
+    double median = 0.0;
+    if (!parallax.empty()) {
+      std::nth_element(parallax.begin(), parallax.begin() + parallax.size() / 2, parallax.end());
+      median = parallax[parallax.size() / 2];
+    }
+    const double per_plane = median / std::max(1, config.fronto_planes - 1);
+    std::ostringstream why;
+    why.precision(3);
+    if (overlap < config.min_overlap) {
+      why << view.name << ": overlap " << overlap << " < min_overlap " << config.min_overlap;
+    } else if (per_plane < config.min_parallax_px) {
+      why << view.name << ": parallax " << per_plane << " px per plane < min_parallax_px " << config.min_parallax_px
+          << " (baseline too small for the depth range)";
+    } else {
+      keep.push_back(static_cast<int>(i));
+      continue;
+    }
+    if (reasons) reasons->push_back(why.str());
+  }
+  return keep;
+}
+
+SweepView rigSweepView(const Rig& rig, int index, int ref_index, const cv::Mat& image, const cv::Mat& mask) {
+  const RigCamera& cam = rig.cameras.at(index);
+  const RigCamera& ref = rig.cameras.at(ref_index);
+  SweepView view;
+  view.name = cam.name;
+  view.camera = cam.model;
+  view.T_ref_view = ref.T_cam0_cam.inverse() * cam.T_cam0_cam;
+  view.image = image;
+  view.mask = mask;
+  return view;
+}
+
+// ---------------------------------------------------------------------------
+
+PlaneSweep::PlaneSweep(const PlaneSweepConfig& config) : config_(config) {
+  config_.validate();
+  backend_ = config_.backend == "cpu" ? makeCpuSweepBackend() : makeOpenClSweepBackend(config_.device);
+}
+
+PlaneSweep::~PlaneSweep() = default;
+
+std::string PlaneSweep::backendName() const { return backend_->name(); }
+
+void PlaneSweep::setFilters(const DepthFilterConfig& filters) {
+  filters.validate();
+  config_.filters = filters;
+}
+
+const std::vector<float>& PlaneSweep::raysFor(int slot, const CameraModel& camera, const cv::Mat& mask,
+                                              unsigned* version) {
+  RayCache& cache = rays_[slot];
+  const FmCameraT<float> params = camera.floatParams();
+  const bool same_mask = !cache.mask.empty() && cache.mask.size() == mask.size() &&
+                         cv::countNonZero(cache.mask != mask) == 0;
+  if (cache.rays.empty() || std::memcmp(&params, &cache.camera, sizeof(params)) != 0 || !same_mask) {
+    const std::vector<Eigen::Vector3f> rays = pixelRays(camera);
+    cache.rays.assign(3 * rays.size(), 0.0f);
+    for (size_t i = 0; i < rays.size(); ++i) {
+      if (!rays[i].allFinite() || mask.data[i] != 0) continue;
+      for (int a = 0; a < 3; ++a) cache.rays[3 * i + a] = rays[i][a];
+    }
+    cache.camera = params;
+    cache.mask = mask.clone();
+    ++cache.version;
+  }
+  *version = cache.version;
+  return cache.rays;
+}
+
+DepthResult PlaneSweep::compute(const SweepView& ref, const std::vector<SweepView>& supports,
+                                const Eigen::Isometry3d* T_base_ref) {
+  const auto t0 = std::chrono::steady_clock::now();
+  checkImage(ref);
+  const cv::Mat ref_mask = checkedMask(ref);
+  for (const auto& s : supports) checkImage(s);
+  DepthResult result;
+  std::vector<int> used = selectSupportViews(config_, ref.camera, supports, &result.dropped_views);
+  if (used.size() > FM_SWEEP_MAX_VIEWS) {
+    throw std::invalid_argument("too many supporting views: " + std::to_string(used.size()) + " > " +
+                                std::to_string(FM_SWEEP_MAX_VIEWS));
+  }
+  for (int i : used) result.used_views.push_back(supports[i].name);
+  const int W = ref.camera.width(), H = ref.camera.height();
+  result.raw_depth = cv::Mat(H, W, CV_32FC1, cv::Scalar(NAN));
+  result.cost = cv::Mat(H, W, CV_32FC1, cv::Scalar(NAN));
+  result.uniqueness = cv::Mat(H, W, CV_32FC1, cv::Scalar(NAN));
+  if (!used.empty()) {
+    const std::vector<FmSweepPlane> planes = makeSweepPlanes(config_, T_base_ref);
+    const cv::Mat ref_full = toSweepImage(ref.image, ref.name);
+    std::vector<cv::Mat> img_full, mask_full;
+    for (int i : used) {
+      img_full.push_back(toSweepImage(supports[i].image, supports[i].name));
+      mask_full.push_back(checkedMask(supports[i]));
+    }
+    // One scale: slot 0 full view, 1 half view, 2 full-resolution crop.
+    auto run = [&](int slot, cv::Mat* range, cv::Mat* cost, cv::Mat* ratio) {
+      SweepLevel level;
+      level.id = slot;
+      CameraModel cam = ref.camera;
+      cv::Mat ref_img = ref_full, rmask = ref_mask;
+      const bool half = slot == 1;
+      if (half) {
+        const int hw = W / 2, hh = H / 2;
+        cam = ref.camera.scaled(0.5, hw, hh);
+        cv::resize(ref_full, ref_img, cv::Size(hw, hh), 0, 0, cv::INTER_AREA);
+        cv::resize(ref_mask, rmask, cv::Size(hw, hh), 0, 0, cv::INTER_AREA);
+        rmask = rmask != 0;  // any masked pixel under a half-resolution pixel masks it
+      } else if (slot == 2) {
+        const int cw = std::min(W, static_cast<int>(std::lround(config_.crop_width * W)));
+        const int ch = std::min(H, static_cast<int>(std::lround(config_.crop_height * H)));
+        const int x0 = std::clamp(static_cast<int>(std::lround(ref.camera.params().cx + 0.5 - cw / 2.0)), 0, W - cw);
+        const int y0 = std::clamp(static_cast<int>(std::lround(ref.camera.params().cy + 0.5 - ch / 2.0)), 0, H - ch);
+        cam = ref.camera.cropped(x0, y0, cw, ch);
+        const cv::Rect roi(x0, y0, cw, ch);
+        ref_img = ref_full(roi).clone();
+        rmask = ref_mask(roi).clone();
+      }
+      level.rays = &raysFor(slot, cam, rmask, &level.rays_version);
+      level.width = cam.width();
+      level.height = cam.height();
+      level.ref = ref_img;
+      level.radius = (half ? config_.window_half : config_.window_full) / 2;
+      windowStats(ref_img, level.radius, &level.ref_mean, &level.ref_std);
+      for (size_t k = 0; k < used.size(); ++k) {
+        const SweepView& s = supports[used[k]];
+        const Eigen::Isometry3d T_view_ref = s.T_ref_view.inverse();
+        if (half) {
+          const int sw = s.camera.width() / 2, sh = s.camera.height() / 2;
+          level.cameras.push_back(s.camera.scaled(0.5, sw, sh).floatParams());
+          cv::Mat im, mk;
+          cv::resize(img_full[k], im, cv::Size(sw, sh), 0, 0, cv::INTER_AREA);
+          cv::resize(mask_full[k], mk, cv::Size(sw, sh), 0, 0, cv::INTER_AREA);
+          im.setTo(-1.0f, mk != 0);  // any masked pixel under a half-resolution pixel masks it
+          level.images.push_back(im);
+        } else {
+          level.cameras.push_back(s.camera.floatParams());
+          cv::Mat im = img_full[k].clone();
+          im.setTo(-1.0f, mask_full[k] != 0);
+          level.images.push_back(im);
+        }
+        level.poses.push_back(toViewPose(T_view_ref));
+      }
+      backend_->sweep(level, planes, config_, range, cost, ratio);
+      return cam;
+    };
+    cv::Mat range, cost, ratio;
+    if (config_.resolution == "full") {
+      run(0, &result.raw_depth, &result.cost, &result.uniqueness);
+    } else {
+      run(1, &range, &cost, &ratio);
+      result.raw_depth = upsampleNearest(range, W, H);
+      result.cost = upsampleNearest(cost, W, H);
+      result.uniqueness = upsampleNearest(ratio, W, H);
+      if (config_.resolution == "multiscale") {
+        const CameraModel crop = run(2, &range, &cost, &ratio);
+        const int x0 = static_cast<int>(std::lround(ref.camera.params().cx - crop.params().cx));
+        const int y0 = static_cast<int>(std::lround(ref.camera.params().cy - crop.params().cy));
+        for (int v = 0; v < range.rows; ++v) {
+          for (int u = 0; u < range.cols; ++u) {
+            const float d = range.at<float>(v, u);
+            if (!std::isfinite(d)) continue;  // the crop wins where it is valid
+            result.raw_depth.at<float>(y0 + v, x0 + u) = d;
+            result.cost.at<float>(y0 + v, x0 + u) = cost.at<float>(v, u);
+            result.uniqueness.at<float>(y0 + v, x0 + u) = ratio.at<float>(v, u);
+          }
+        }
+      }
+    }
+  }
+  result.sweep_ms = msSince(t0);
+  const auto t1 = std::chrono::steady_clock::now();
+  result.depth = applyDepthFilters(config_.filters, result.raw_depth, result.cost, result.uniqueness);
+  // Masked reference pixels never carry a depth (half resolution could leak).
+  result.depth.setTo(NAN, ref_mask != 0);
+  result.raw_depth.setTo(NAN, ref_mask != 0);
+  result.filter_ms = msSince(t1);
+  result.total_ms = msSince(t0);
+  return result;
+}
+
+}  // namespace fisheye_mapping
