@@ -57,6 +57,10 @@ cv::Mat checkedMask(const SweepView& view) {
 
 void checkImage(const SweepView& view) {
   if (view.image.empty()) throw std::invalid_argument(view.name + ": empty image");
+  const int t = view.image.type();
+  if (t != CV_8UC1 && t != CV_8UC3 && t != CV_8UC4 && t != CV_16UC1 && t != CV_32FC1) {
+    throw std::invalid_argument(view.name + ": unsupported image type (expected 8-bit grey/BGR/BGRA, 16-bit grey or float)");
+  }
   if (view.image.cols != view.camera.width() || view.image.rows != view.camera.height()) {
     std::ostringstream os;
     os << view.name << ": image is " << view.image.cols << "x" << view.image.rows << ", calibration says "
@@ -316,7 +320,10 @@ DepthResult PlaneSweep::compute(const SweepView& ref, const std::vector<SweepVie
   const auto t0 = std::chrono::steady_clock::now();
   checkImage(ref);
   const cv::Mat ref_mask = checkedMask(ref);
-  for (const auto& s : supports) checkImage(s);
+  for (const auto& s : supports) {
+    checkImage(s);
+    checkedMask(s);
+  }
   DepthResult result;
   std::vector<int> used = selectSupportViews(config_, ref.camera, supports, &result.dropped_views);
   if (used.size() > FM_SWEEP_MAX_VIEWS) {

@@ -1,0 +1,400 @@
+// Plane-sweep depth: the shared functions against hand-computed values, plane
+// geometry, filters, support-view selection, bad input, and whole sweeps of a
+// rendered synthetic street (exact ground truth) on both backends.
+#include <cmath>
+#include <random>
+
+#include <gtest/gtest.h>
+#include <opencv2/imgproc.hpp>
+
+#include "fisheye_mapping/core/depth_image.h"
+#include "fisheye_mapping/core/plane_sweep.h"
+#include "fisheye_mapping/core/synthetic_world.h"
+
+namespace fm = fisheye_mapping;
+
+namespace {
+
+const std::string kData = FM_TEST_DATA_DIR;
+
+fm::CameraModel smallFisheye(int w = 256, int h = 136) {
+  fm::Intrinsics in;
+  in.width = w;
+  in.height = h;
+  in.fx = in.fy = 130.0 * w / 256.0;
+  in.cx = (w - 1) / 2.0;
+  in.cy = (h - 1) / 2.0;
+  return fm::CameraModel::unified(in, 0.98, -0.02, 0.004, 0.0002, -0.0001);
+}
+
+// Window sums of W over R for the ZNCC function.
+float costOf(const std::vector<float>& w, const std::vector<float>& r) {
+  double sw = 0, sww = 0, swr = 0, sr = 0, srr = 0;
+  for (size_t i = 0; i < w.size(); ++i) {
+    sw += w[i], sww += w[i] * w[i], swr += w[i] * r[i], sr += r[i], srr += r[i] * r[i];
+  }
+  const double n = w.size(), mean_r = sr / n, std_r = std::sqrt(srr / n - mean_r * mean_r);
+  return fm::fm_zncc_cost(static_cast<float>(n), static_cast<float>(sw), static_cast<float>(sww),
+                          static_cast<float>(swr), static_cast<float>(mean_r), static_cast<float>(std_r));
+}
+
+}  // namespace
+
+TEST(PlaneSweepShared, ZnccCostMatchesDefinition) {
+  std::vector<float> r = {0.1f, 0.5f, 0.3f, 0.9f, 0.2f, 0.7f, 0.4f, 0.6f, 0.8f};
+  std::vector<float> affine, inverted, orth;
+  for (float x : r) affine.push_back(0.5f * x + 0.2f);   // ZNCC +1 -> cost 0
+  for (float x : r) inverted.push_back(1.0f - x);        // ZNCC -1 -> cost 1
+  EXPECT_NEAR(costOf(affine, r), 0.0f, 1e-4);
+  EXPECT_NEAR(costOf(inverted, r), 1.0f, 1e-4);
+  // A pattern uncorrelated with r by construction: ZNCC 0 -> cost 0.5.
+  // r - mean = d; pick w with sum(w - mean_w) d = 0: w = d rotated so the dot vanishes.
+  double mean = 0;
+  for (float x : r) mean += x / r.size();
+  std::vector<double> d;
+  for (float x : r) d.push_back(x - mean);
+  std::vector<double> e = {1, -1, 0, 0, 0, 0, 0, 0, 0};  // zero mean
+  double dd = 0, de = 0;
+  for (size_t i = 0; i < d.size(); ++i) dd += d[i] * d[i], de += d[i] * e[i];
+  for (size_t i = 0; i < d.size(); ++i) orth.push_back(static_cast<float>(0.5 + 0.3 * (e[i] - de / dd * d[i])));
+  EXPECT_NEAR(costOf(orth, r), 0.5f, 1e-4);
+  // A flat window carries no texture: invalid.
+  EXPECT_EQ(costOf(std::vector<float>(9, 0.4f), r), FM_COST_INVALID);
+  EXPECT_EQ(costOf(affine, std::vector<float>(9, 0.4f)), FM_COST_INVALID);
+}
+
+TEST(PlaneSweepShared, AggregationByHand) {
+  const float c[4] = {0.4f, FM_COST_INVALID, 0.1f, 0.3f};
+  EXPECT_NEAR(fm::fm_aggregate(c, 4, FM_AGGREGATE_AVERAGE, 2), (0.4f + 0.1f + 0.3f) / 3, 1e-6);
+  EXPECT_NEAR(fm::fm_aggregate(c, 4, FM_AGGREGATE_BEST_K, 2), (0.1f + 0.3f) / 2, 1e-6);
+  EXPECT_NEAR(fm::fm_aggregate(c, 4, FM_AGGREGATE_BEST_K, 5), (0.4f + 0.1f + 0.3f) / 3, 1e-6);
+  const float ties[3] = {0.2f, 0.2f, 0.2f};
+  EXPECT_NEAR(fm::fm_aggregate(ties, 3, FM_AGGREGATE_BEST_K, 2), 0.2f, 1e-6);
+  const float none[2] = {FM_COST_INVALID, FM_COST_INVALID};
+  EXPECT_EQ(fm::fm_aggregate(none, 2, FM_AGGREGATE_AVERAGE, 1), FM_COST_INVALID);
+}
+
+TEST(PlaneSweepShared, SelectRefinesToTheParabolaVertexAndMeasuresUniqueness) {
+  fm::PlaneSweepConfig config;
+  config.fronto_planes = 20;
+  config.near = 2.0;
+  config.far = 40.0;
+  const std::vector<fm::FmSweepPlane> planes = fm::makeSweepPlanes(config, nullptr);
+  ASSERT_EQ(planes.size(), 20u);
+  // Quadratic cost in the plane index with its vertex at 7.3, plus a second
+  // minimum at plane 15.
+  std::vector<float> volume(planes.size());
+  for (size_t j = 0; j < planes.size(); ++j) volume[j] = 0.1f + 0.01f * static_cast<float>((j - 7.3) * (j - 7.3));
+  volume[15] = 0.2f;
+  const Eigen::Vector3f ray = Eigen::Vector3f(0.3f, -0.1f, 1.0f).normalized();
+  float range, cost, ratio;
+  ASSERT_TRUE(fm::fm_select_plane(volume.data(), 1, planes.data(), 20, ray.x(), ray.y(), ray.z(), 1, &range, &cost, &ratio));
+  // Hand computation: vertex offset 0.3 from plane 7 towards plane 8, in
+  // inverse depth: s = s7 + 0.3 (s8 - s7), z = 1 / s, range = z / ray_z.
+  const double s7 = 1 / 2.0 + (1 / 40.0 - 1 / 2.0) * 7 / 19.0, s8 = 1 / 2.0 + (1 / 40.0 - 1 / 2.0) * 8 / 19.0;
+  EXPECT_NEAR(range, (1.0 / (s7 + 0.3 * (s8 - s7))) / ray.z(), 1e-4);
+  EXPECT_NEAR(cost, volume[7], 1e-7);
+  // Second best: plane 15 (0.2) beats every plane outside [6, 8] except... the
+  // lowest of those is min(cost[5], cost[9], 0.2) = cost[9] = 0.1 + 0.01 * 1.7^2.
+  EXPECT_NEAR(ratio, volume[7] / volume[9], 1e-6);
+  // Without refinement the range is plane 7's.
+  ASSERT_TRUE(fm::fm_select_plane(volume.data(), 1, planes.data(), 20, ray.x(), ray.y(), ray.z(), 0, &range, &cost, &ratio));
+  EXPECT_NEAR(range, planes[7].d / ray.z(), 1e-4);
+  // No valid cost: no depth.
+  std::vector<float> invalid(planes.size(), FM_COST_INVALID);
+  EXPECT_FALSE(fm::fm_select_plane(invalid.data(), 1, planes.data(), 20, ray.x(), ray.y(), ray.z(), 1, &range, &cost, &ratio));
+}
+
+TEST(PlaneSweepShared, PlaneOfTheOtherFamilyThroughTheSamePointIsNotASecondBest) {
+  fm::PlaneSweepConfig config;
+  config.fronto_planes = 10;
+  config.ground_planes = 4;
+  config.near = 2.0;
+  config.far = 30.0;
+  Eigen::Isometry3d T_base_ref = Eigen::Isometry3d::Identity();  // camera looking down at z = 0 from 2 m
+  T_base_ref.linear() << 1, 0, 0, 0, -1, 0, 0, 0, -1;
+  T_base_ref.translation() = Eigen::Vector3d(0, 0, 2.0);
+  config.ground_min = -0.3;
+  config.ground_max = 0.3;
+  const auto planes = fm::makeSweepPlanes(config, &T_base_ref);
+  ASSERT_EQ(planes.size(), 14u);
+  // The ray straight down meets fronto plane j and ground plane (height h) at
+  // the same range when h = 2 - d_j; make the best a ground plane and give a
+  // fronto plane at that same range (within the ground neighbours' span) a
+  // nearly equal cost: the ratio must ignore it.
+  const float rx = 0, ry = 0, rz = 1;
+  std::vector<float> volume(planes.size(), 0.9f);
+  volume[11] = 0.05f;  // ground plane h = -0.1: range 2.1
+  volume[10] = 0.2f;
+  volume[12] = 0.2f;
+  volume[0] = 0.06f;   // fronto plane d = 2.0: range 2.0, inside [1.9, 2.3]
+  volume[5] = 0.5f;    // a genuine alternative elsewhere
+  float range, cost, ratio;
+  ASSERT_TRUE(fm::fm_select_plane(volume.data(), 1, planes.data(), 14, rx, ry, rz, 0, &range, &cost, &ratio));
+  EXPECT_NEAR(range, 2.0 - (-0.1), 1e-5);
+  EXPECT_NEAR(ratio, 0.05f / 0.5f, 1e-6);
+}
+
+TEST(PlaneSweepPlanes, GroundPlanesContainPointsAtTheirHeight) {
+  fm::PlaneSweepConfig config;
+  const fm::Rig rig = fm::loadKalibrRig(kData + "/small_rig_camchain.yaml", kData + "/small_rig_mount.yaml");
+  const Eigen::Isometry3d T_base_ref = rig.cameras[1].T_base_cam;
+  const auto planes = fm::makeSweepPlanes(config, &T_base_ref);
+  ASSERT_EQ(planes.size(), static_cast<size_t>(config.fronto_planes + config.ground_planes));
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> U(-20, 20);
+  for (int g = 0; g < config.ground_planes; ++g) {
+    const auto& p = planes[config.fronto_planes + g];
+    const double h = config.ground_min + (config.ground_max - config.ground_min) * g / (config.ground_planes - 1);
+    for (int k = 0; k < 5; ++k) {
+      const Eigen::Vector3d X_ref = T_base_ref.inverse() * Eigen::Vector3d(U(rng), U(rng), h);
+      EXPECT_NEAR(p.nx * X_ref.x() + p.ny * X_ref.y() + p.nz * X_ref.z(), p.d, 1e-4);
+    }
+  }
+  // Fronto-parallel planes: uniform in inverse depth from near to far.
+  EXPECT_NEAR(planes.front().d, config.near, 1e-5);
+  EXPECT_NEAR(planes[config.fronto_planes - 1].d, config.far, 1e-3);
+  const double step = 1 / planes[1].d - 1 / planes[0].d;
+  for (int j = 2; j < config.fronto_planes; ++j) EXPECT_NEAR(1 / planes[j].d - 1 / planes[j - 1].d, step, 1e-6);
+}
+
+TEST(PlaneSweepFilters, EachFilterByHand) {
+  cv::Mat raw(5, 5, CV_32FC1, cv::Scalar(10.0f)), cost(5, 5, CV_32FC1, cv::Scalar(0.01f)),
+      ratio(5, 5, CV_32FC1, cv::Scalar(0.5f));
+  cost.at<float>(0, 0) = 0.1f;  // upper half: alpha 0.05 -> dropped
+  cost.at<float>(4, 0) = 0.1f;  // lower half: alpha 0.3 -> kept
+  cost.at<float>(4, 1) = 0.4f;  // lower half, above 0.3 -> dropped
+  ratio.at<float>(2, 4) = 0.95f;  // not unique -> dropped
+  raw.at<float>(2, 2) = 20.0f;    // no neighbour within 0.5 m -> inconsistent
+  fm::DepthFilterConfig f;
+  f.cost = true;
+  f.uniqueness = f.consistency = false;
+  cv::Mat d = fm::applyDepthFilters(f, raw, cost, ratio);
+  EXPECT_TRUE(std::isnan(d.at<float>(0, 0)));
+  EXPECT_EQ(d.at<float>(4, 0), 10.0f);
+  EXPECT_TRUE(std::isnan(d.at<float>(4, 1)));
+  EXPECT_EQ(d.at<float>(2, 4), 10.0f);
+  f.uniqueness = true;
+  d = fm::applyDepthFilters(f, raw, cost, ratio);
+  EXPECT_TRUE(std::isnan(d.at<float>(2, 4)));
+  f.consistency = true;
+  f.consistency_window = 3;
+  d = fm::applyDepthFilters(f, raw, cost, ratio);
+  EXPECT_TRUE(std::isnan(d.at<float>(2, 2)));  // 0 of 8 neighbours consistent
+  // (1, 1): neighbours (0,0) dropped, (2,2) at 20 m: 6 of 8 consistent -> kept.
+  EXPECT_EQ(d.at<float>(1, 1), 10.0f);
+  // A corner pixel has 3 neighbours in the image of the window's 8: with
+  // delta 0.3 it needs 2.4, so (0, 4) with 3 consistent neighbours stays...
+  EXPECT_EQ(d.at<float>(0, 4), 10.0f);
+  // ...and with delta 0.5 (4 needed) it goes.
+  f.delta = 0.5;
+  d = fm::applyDepthFilters(f, raw, cost, ratio);
+  EXPECT_TRUE(std::isnan(d.at<float>(0, 4)));
+  // NaN cost (no plane) is dropped by the cost filter.
+  cost.at<float>(3, 3) = NAN;
+  f = fm::DepthFilterConfig();
+  f.uniqueness = f.consistency = false;
+  EXPECT_TRUE(std::isnan(fm::applyDepthFilters(f, raw, cost, ratio).at<float>(3, 3)));
+}
+
+TEST(PlaneSweepViews, SmallBaselineAndNoOverlapAreDropped) {
+  fm::PlaneSweepConfig config;
+  const fm::CameraModel cam = smallFisheye(1024, 544);
+  auto view = [&](const std::string& name, const Eigen::Vector3d& t, double yaw_deg) {
+    fm::SweepView v;
+    v.name = name;
+    v.camera = cam;
+    v.T_ref_view.translation() = t;
+    v.T_ref_view.linear() = Eigen::AngleAxisd(yaw_deg * M_PI / 180, Eigen::Vector3d::UnitY()).toRotationMatrix();
+    return v;
+  };
+  std::vector<std::string> reasons;
+  const auto keep = fm::selectSupportViews(
+      config, cam, {view("wide", {0.6, 0, 0}, 0), view("tiny", {0.1, 0, 0}, 0), view("back", {0.6, 0, 0}, 180)},
+      &reasons);
+  ASSERT_EQ(keep.size(), 1u);
+  EXPECT_EQ(keep[0], 0);
+  ASSERT_EQ(reasons.size(), 2u);
+  EXPECT_NE(reasons[0].find("tiny: parallax"), std::string::npos) << reasons[0];
+  EXPECT_NE(reasons[1].find("back: overlap"), std::string::npos) << reasons[1];
+}
+
+TEST(PlaneSweepInput, BadInputGetsClearErrors) {
+  fm::PlaneSweepConfig config;
+  config.backend = "cpu";
+  fm::PlaneSweep sweep(config);
+  fm::SweepView ref{"cam0", smallFisheye(), Eigen::Isometry3d::Identity(), cv::Mat(136, 256, CV_8UC1, cv::Scalar(9)), {}};
+  fm::SweepView other = ref;
+  other.name = "cam1";
+  other.T_ref_view.translation() = Eigen::Vector3d(0.6, 0, 0);
+  other.image = cv::Mat(100, 256, CV_8UC1);
+  try {
+    sweep.compute(ref, {other}, nullptr);
+    FAIL() << "no error for a wrong image size";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_STREQ(e.what(), "cam1: image is 256x100, calibration says 256x136");
+  }
+  other.image = cv::Mat(136, 256, CV_64FC1, cv::Scalar(0));
+  EXPECT_THROW(sweep.compute(ref, {other}, nullptr), std::invalid_argument);
+  other.image = cv::Mat(136, 256, CV_8UC1, cv::Scalar(0));
+  other.mask = cv::Mat(10, 10, CV_8UC1);
+  try {
+    sweep.compute(ref, {other}, nullptr);
+    FAIL() << "no error for a wrong mask size";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("cam1: self-mask is 10x10"), std::string::npos) << e.what();
+  }
+  config.window_full = 8;
+  try {
+    fm::PlaneSweep bad(config);
+    FAIL() << "no error for an even window";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_EQ(std::string(e.what()).rfind("window_full:", 0), 0u) << e.what();
+  }
+  config = fm::PlaneSweepConfig();
+  config.filters.delta = 2;
+  EXPECT_THROW(fm::PlaneSweep{config}, std::invalid_argument);
+  config = fm::PlaneSweepConfig();
+  config.resolution = "quarter";
+  EXPECT_THROW(fm::PlaneSweep{config}, std::invalid_argument);
+}
+
+// ---------------------------------------------------------------------------
+// Whole sweeps of a rendered street seen by the small 3-camera rig.
+class PlaneSweepScene : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    rig_ = new fm::Rig(fm::loadKalibrRig(kData + "/small_rig_camchain.yaml", kData + "/small_rig_mount.yaml"));
+    fm::synth::WorldConfig wc;
+    wc.preset = "urban";
+    wc.seed = 2;
+    wc.route_length = 120;
+    world_ = new fm::synth::World(wc);
+    const double t = 3.0;
+    const Eigen::Isometry3d T_W_B = world_->egoPose(t);
+    for (size_t c = 0; c < rig_->cameras.size(); ++c) {
+      const auto& cam = rig_->cameras[c];
+      auto frame = world_->render(cam.model, fm::pixelRays(cam.model), T_W_B * cam.T_base_cam, t, 100 + c);
+      images_.push_back(frame.image);
+      if (c == 0) truth_ = frame.depth;
+    }
+  }
+  static void TearDownTestSuite() {
+    delete rig_;
+    delete world_;
+  }
+
+  static fm::PlaneSweepConfig config(const std::string& backend, const std::string& resolution) {
+    fm::PlaneSweepConfig c;
+    c.backend = backend;
+    c.resolution = resolution;
+    c.min_parallax_px = 0.05;  // quarter-resolution images: a quarter of the parallax
+    c.filters.cost = c.filters.uniqueness = c.filters.consistency = false;
+    return c;
+  }
+
+  static fm::DepthResult run(const fm::PlaneSweepConfig& c, const cv::Mat& ref_mask = cv::Mat()) {
+    fm::PlaneSweep sweep(c);
+    std::vector<fm::SweepView> supports = {fm::rigSweepView(*rig_, 1, 0, images_[1]),
+                                           fm::rigSweepView(*rig_, 2, 0, images_[2])};
+    const Eigen::Isometry3d T_base_ref = rig_->cameras[0].T_base_cam;
+    return sweep.compute(fm::rigSweepView(*rig_, 0, 0, images_[0], ref_mask), supports, &T_base_ref);
+  }
+
+  static fm::Rig* rig_;
+  static fm::synth::World* world_;
+  static std::vector<cv::Mat> images_;
+  static cv::Mat truth_;
+};
+fm::Rig* PlaneSweepScene::rig_ = nullptr;
+fm::synth::World* PlaneSweepScene::world_ = nullptr;
+std::vector<cv::Mat> PlaneSweepScene::images_;
+cv::Mat PlaneSweepScene::truth_;
+
+TEST_F(PlaneSweepScene, OpenClAgreesWithTheReferenceImplementation) {
+  for (const std::string res : {"full", "multiscale"}) {
+    const fm::DepthResult cpu = run(config("cpu", res));
+    const fm::DepthResult cl = run(config("opencl", res));
+    ASSERT_EQ(cpu.used_views.size(), 2u);
+    // The kernels' running float sums lose precision on nearly flat windows
+    // (variance ~1e-4 next to mean^2 ~0.5); compare where there is texture.
+    cv::Mat grey, mean, sq;
+    images_[0].convertTo(grey, CV_32F, 1 / 255.0);
+    cv::boxFilter(grey, mean, CV_32F, cv::Size(9, 9));
+    cv::boxFilter(grey.mul(grey), sq, CV_32F, cv::Size(9, 9));
+    const cv::Mat textured = (sq - mean.mul(mean)) > 0.03 * 0.03;
+    int both = 0, one = 0, close = 0;
+    for (int v = 0; v < cpu.raw_depth.rows; ++v) {
+      for (int u = 0; u < cpu.raw_depth.cols; ++u) {
+        if (!textured.at<uchar>(v, u)) continue;
+        const float a = cpu.raw_depth.at<float>(v, u), b = cl.raw_depth.at<float>(v, u);
+        if (std::isfinite(a) && std::isfinite(b)) {
+          ++both;
+          close += std::fabs(a - b) <= 0.01f * a;
+          EXPECT_NEAR(cpu.cost.at<float>(v, u), cl.cost.at<float>(v, u), 0.01) << res << " at " << u << "," << v;
+        } else if (std::isfinite(a) != std::isfinite(b)) {
+          ++one;
+        }
+      }
+    }
+    // Running float sums (OpenCL) vs direct double sums (reference): costs
+    // within 0.01, which moves the parabolic refinement a little (ranges
+    // within 1 %) and can flip a near-tie between planes on a few pixels.
+    EXPECT_GT(both, 0.3 * cpu.raw_depth.total()) << res;
+    EXPECT_GE(close, 0.99 * both) << res;
+    EXPECT_LE(one, 0.002 * cpu.raw_depth.total()) << res;
+  }
+}
+
+TEST(PlaneSweepAccuracy, DepthMatchesTheRenderedTruthAndFiltersHelp) {
+  // The default rig's five cameras at half resolution (512x272), on a street.
+  fm::Rig rig = fm::loadKalibrRig(FM_CONFIG_DIR "/rig/default_camchain.yaml", FM_CONFIG_DIR "/rig/default_mount.yaml");
+  for (auto& c : rig.cameras) c.model = c.model.scaled(0.5, 512, 272);
+  fm::synth::WorldConfig wc;
+  wc.seed = 4;
+  wc.route_length = 120;
+  const fm::synth::World world(wc);
+  const double t = 2.0;
+  std::vector<cv::Mat> images;
+  cv::Mat truth;
+  for (size_t c = 0; c < rig.cameras.size(); ++c) {
+    const auto& cam = rig.cameras[c];
+    auto frame = world.render(cam.model, fm::pixelRays(cam.model), world.egoPose(t) * cam.T_base_cam, t, 7 + c);
+    images.push_back(frame.image);
+    if (c == 0) truth = frame.depth;
+  }
+  fm::PlaneSweepConfig c;
+  c.resolution = "full";
+  c.min_parallax_px = 0.1;
+  c.window_full = 7;
+  fm::PlaneSweep sweep(c);
+  std::vector<fm::SweepView> supports;
+  for (int i = 1; i < 5; ++i) supports.push_back(fm::rigSweepView(rig, i, 0, images[i]));
+  const Eigen::Isometry3d T_base_ref = rig.cameras[0].T_base_cam;
+  const fm::DepthResult r = sweep.compute(fm::rigSweepView(rig, 0, 0, images[0]), supports, &T_base_ref);
+  ASSERT_EQ(r.used_views.size(), 4u);
+  const fm::DepthErrorStats raw = fm::depthError(r.raw_depth, truth, cv::Mat(), 15.0, c.far);
+  EXPECT_GT(raw.coverage(), 0.8);
+  EXPECT_LT(raw.median, 0.15) << "median error " << raw.median;
+  const fm::DepthErrorStats f = fm::depthError(r.depth, truth, cv::Mat(), 15.0, c.far);
+  EXPECT_LT(f.median, 0.6 * raw.median) << f.median << " vs " << raw.median;
+  EXPECT_LT(f.mean, 0.4 * raw.mean) << f.mean << " vs " << raw.mean;
+  EXPECT_GT(f.coverage(), 0.2);
+  // Filtering drops pixels, never moves them.
+  for (int v = 0; v < r.depth.rows; ++v) {
+    for (int u = 0; u < r.depth.cols; ++u) {
+      const float d = r.depth.at<float>(v, u);
+      if (std::isfinite(d)) ASSERT_EQ(d, r.raw_depth.at<float>(v, u));
+    }
+  }
+}
+
+TEST_F(PlaneSweepScene, SelfMaskedPixelsHaveNoDepth) {
+  cv::Mat mask(images_[0].size(), CV_8UC1, cv::Scalar(0));
+  mask.rowRange(100, 136).setTo(255);  // the "hood"
+  fm::PlaneSweepConfig c = config("opencl", "multiscale");
+  const fm::DepthResult r = run(c, mask);
+  EXPECT_EQ(cv::countNonZero(r.raw_depth.rowRange(100, 136) == r.raw_depth.rowRange(100, 136)), 0);
+  // Rows just above the hood still get depth (the ground there is textured).
+  EXPECT_GT(cv::countNonZero(r.raw_depth.rowRange(80, 96) == r.raw_depth.rowRange(80, 96)), 0.5 * 16 * 256);
+}
