@@ -6,6 +6,7 @@
 
 #include <ros/node_handle.h>
 
+#include "fisheye_mapping/core/plane_sweep.h"
 #include "fisheye_mapping/core/rig.h"
 
 namespace fisheye_mapping {
@@ -13,6 +14,12 @@ namespace fisheye_mapping {
 // Reads the private parameters `camchain` and `mount` (file paths) and loads
 // the rig. Throws CalibrationError naming the missing parameter or the bad file.
 Rig loadRigFromParams(const ros::NodeHandle& private_nh);
+
+// Fills a PlaneSweepConfig from private parameters of the same names
+// (fronto_planes, near, far, ground_planes, ..., filters under the names of
+// cfg/PlaneSweepFilters.cfg), starting from the core's defaults. The result
+// is validated (std::invalid_argument names the field).
+PlaneSweepConfig loadPlaneSweepConfig(const ros::NodeHandle& private_nh);
 
 }  // namespace fisheye_mapping
 
