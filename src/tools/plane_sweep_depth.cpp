@@ -1,0 +1,238 @@
+// plane_sweep_depth: offline plane-sweep depth with the same core as the
+// nodelet (rosrun fisheye_mapping plane_sweep_depth ...).
+//
+// Images mode:
+//   plane_sweep_depth --camchain F --mount F --reference cam0
+//                     --image cam0=a.png --image cam1=b.png ... [--mask cam0=m.png]
+//                     --out PREFIX [--config YAML] [--set key=value ...]
+//   writes PREFIX_depth.tiff (32-bit float, range along the ray, NaN invalid),
+//   PREFIX_depth.png (colour-coded inverse depth) and PREFIX_cost.tiff.
+// Bag mode:
+//   plane_sweep_depth --camchain F --mount F --reference cam0 --bag drive.bag
+//                     --out DIR [--topic camN=/topic ...] [--max-sets N]
+//   groups the rig's image topics (the camchain's rostopic, or --topic) by
+//   exact stamp and writes DIR/depth_<stamp>.tiff per complete frame set.
+#include <chrono>
+#include <filesystem>
+#include <iomanip>
+#include <iostream>
+#include <map>
+#include <set>
+#include <sstream>
+
+#include <cv_bridge/cv_bridge.h>
+#include <opencv2/imgcodecs.hpp>
+#include <rosbag/bag.h>
+#include <rosbag/view.h>
+#include <sensor_msgs/Image.h>
+#include <yaml-cpp/yaml.h>
+
+#include "fisheye_mapping/core/depth_image.h"
+#include "fisheye_mapping/core/plane_sweep.h"
+#include "fisheye_mapping/core/rig.h"
+
+namespace fm = fisheye_mapping;
+
+namespace {
+
+[[noreturn]] void usage(const std::string& msg) {
+  std::cerr << "plane_sweep_depth: " << msg << "\n"
+            << "usage: plane_sweep_depth --camchain F --mount F [--reference cam0] [--config YAML] [--set key=value]...\n"
+            << "         (--image CAM=FILE ... [--mask CAM=FILE ...] --out PREFIX\n"
+            << "          | --bag FILE --out DIR [--topic CAM=TOPIC ...] [--max-sets N])\n"
+            << "  Depth is 32-bit float TIFF: metres of range along each pixel's ray, NaN invalid.\n"
+            << "  --config reads plane-sweep parameters (config/plane_sweep_depth.yaml); --set overrides one.\n";
+  std::exit(2);
+}
+
+std::pair<std::string, std::string> split(const std::string& kv, const std::string& what) {
+  const size_t eq = kv.find('=');
+  if (eq == std::string::npos || eq == 0) usage(what + " expects NAME=VALUE, got '" + kv + "'");
+  return {kv.substr(0, eq), kv.substr(eq + 1)};
+}
+
+// Applies one parameter (the names of config/plane_sweep_depth.yaml).
+void setParam(fm::PlaneSweepConfig* c, const std::string& k, const std::string& v) {
+  auto d = [&] { return std::stod(v); };
+  auto i = [&] { return std::stoi(v); };
+  auto b = [&] { return v == "true" || v == "1"; };
+  fm::DepthFilterConfig& f = c->filters;
+  static const std::set<std::string> ignored = {"reference_camera", "support_cameras", "self_masks", "publish_uniqueness"};
+  if (ignored.count(k)) return;
+  if (k == "fronto_planes") c->fronto_planes = i();
+  else if (k == "near") c->near = d();
+  else if (k == "far") c->far = d();
+  else if (k == "ground_planes") c->ground_planes = i();
+  else if (k == "ground_min") c->ground_min = d();
+  else if (k == "ground_max") c->ground_max = d();
+  else if (k == "window_full") c->window_full = i();
+  else if (k == "window_half") c->window_half = i();
+  else if (k == "aggregation") c->aggregation = v;
+  else if (k == "best_k") c->best_k = i();
+  else if (k == "subpixel") c->subpixel = b();
+  else if (k == "resolution") c->resolution = v;
+  else if (k == "crop_width") c->crop_width = d();
+  else if (k == "crop_height") c->crop_height = d();
+  else if (k == "min_parallax_px") c->min_parallax_px = d();
+  else if (k == "min_overlap") c->min_overlap = d();
+  else if (k == "backend") c->backend = v;
+  else if (k == "device") c->device = v;
+  else if (k == "filter_cost") f.cost = b();
+  else if (k == "alpha_upper") f.alpha_upper = d();
+  else if (k == "alpha_lower") f.alpha_lower = d();
+  else if (k == "split_row") f.split_row = d();
+  else if (k == "filter_uniqueness") f.uniqueness = b();
+  else if (k == "max_ratio") f.max_ratio = d();
+  else if (k == "filter_consistency") f.consistency = b();
+  else if (k == "consistency_window") f.consistency_window = i();
+  else if (k == "gamma") f.gamma = d();
+  else if (k == "delta") f.delta = d();
+  else throw std::invalid_argument("unknown parameter '" + k + "'");
+}
+
+void writeOutputs(const std::string& prefix, const fm::DepthResult& r, const fm::PlaneSweepConfig& c) {
+  fm::writeDepthTiff(prefix + "_depth.tiff", r.depth);
+  fm::writeDepthTiff(prefix + "_cost.tiff", r.cost);
+  if (!cv::imwrite(prefix + "_depth.png", fm::colorizeDepth(r.depth, c.near, c.far))) {
+    throw std::runtime_error(prefix + "_depth.png: cannot write");
+  }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::map<std::string, std::string> one;
+  std::vector<std::pair<std::string, std::string>> images, masks, topics, sets;
+  for (int i = 1; i < argc; ++i) {
+    const std::string k = argv[i];
+    if (k == "-h" || k == "--help") usage("help");
+    if (k.rfind("--", 0) != 0 || i + 1 >= argc) usage("bad argument '" + k + "'");
+    const std::string v = argv[++i];
+    if (k == "--image") images.push_back(split(v, k));
+    else if (k == "--mask") masks.push_back(split(v, k));
+    else if (k == "--topic") topics.push_back(split(v, k));
+    else if (k == "--set") sets.push_back(split(v, k));
+    else one[k.substr(2)] = v;
+  }
+  for (const char* req : {"camchain", "mount", "out"}) {
+    if (!one.count(req)) usage(std::string("--") + req + " is required");
+  }
+  if (images.empty() == !one.count("bag")) usage("give either --image CAM=FILE ... or --bag FILE");
+  try {
+    const fm::Rig rig = fm::loadKalibrRig(one["camchain"], one["mount"]);
+    const std::string ref_name = one.count("reference") ? one["reference"] : "cam0";
+    const int ref = rig.indexOf(rig.camera(ref_name).name);
+    fm::PlaneSweepConfig config;
+    if (one.count("config")) {
+      YAML::Node y;
+      try {
+        y = YAML::LoadFile(one["config"]);
+      } catch (const YAML::Exception& e) {
+        throw std::runtime_error(one["config"] + ": " + e.what());
+      }
+      for (const auto& kv : y) {
+        const std::string key = kv.first.as<std::string>();
+        if (kv.second.IsScalar()) setParam(&config, key, kv.second.as<std::string>());
+      }
+    }
+    for (const auto& [k, v] : sets) setParam(&config, k, v);
+    fm::PlaneSweep sweep(config);
+    std::cerr << "plane_sweep_depth: " << sweep.backendName() << ", reference " << ref_name << "\n";
+    const Eigen::Isometry3d T_base_ref = rig.cameras[ref].T_base_cam;
+
+    if (!images.empty()) {
+      std::vector<cv::Mat> img(rig.cameras.size()), mask(rig.cameras.size());
+      for (const auto& [cam, path] : images) {
+        const int i = rig.indexOf(rig.camera(cam).name);
+        img[i] = cv::imread(path, cv::IMREAD_UNCHANGED);
+        if (img[i].empty()) throw std::runtime_error(path + ": cannot read image");
+        fm::checkImageSize(rig.cameras[i], img[i].cols, img[i].rows);
+      }
+      for (const auto& [cam, path] : masks) {
+        const int i = rig.indexOf(rig.camera(cam).name);
+        mask[i] = cv::imread(path, cv::IMREAD_GRAYSCALE);
+        if (mask[i].empty()) throw std::runtime_error(path + ": cannot read mask");
+      }
+      if (img[ref].empty()) throw std::runtime_error("no --image for the reference camera " + ref_name);
+      std::vector<fm::SweepView> views;
+      for (size_t i = 0; i < rig.cameras.size(); ++i) {
+        if (static_cast<int>(i) != ref && !img[i].empty()) views.push_back(fm::rigSweepView(rig, i, ref, img[i], mask[i]));
+      }
+      const fm::DepthResult r = sweep.compute(fm::rigSweepView(rig, ref, ref, img[ref], mask[ref]), views, &T_base_ref);
+      for (const auto& d : r.dropped_views) std::cerr << "plane_sweep_depth: dropped " << d << "\n";
+      writeOutputs(one["out"], r, config);
+      std::cout << "depth: " << cv::countNonZero(r.depth == r.depth) << " valid pixels of " << r.depth.total() << ", "
+                << std::fixed << std::setprecision(1) << r.total_ms << " ms; wrote " << one["out"]
+                << "_depth.tiff, _depth.png, _cost.tiff\n";
+      return 0;
+    }
+
+    // Bag mode.
+    std::map<std::string, int> topic_cam;
+    for (size_t i = 0; i < rig.cameras.size(); ++i) {
+      if (!rig.cameras[i].rostopic.empty()) topic_cam[rig.cameras[i].rostopic] = static_cast<int>(i);
+    }
+    for (const auto& [cam, topic] : topics) {
+      for (auto it = topic_cam.begin(); it != topic_cam.end();) it = it->second == rig.indexOf(cam) ? topic_cam.erase(it) : ++it;
+      topic_cam[topic] = rig.indexOf(rig.camera(cam).name);
+    }
+    std::vector<std::string> topic_list;
+    for (const auto& kv : topic_cam) topic_list.push_back(kv.first);
+    rosbag::Bag bag;
+    try {
+      bag.open(one["bag"], rosbag::bagmode::Read);
+    } catch (const rosbag::BagException& e) {
+      throw std::runtime_error(one["bag"] + ": " + e.what());
+    }
+    rosbag::View view(bag, rosbag::TopicQuery(topic_list));
+    const size_t total_msgs = view.size();
+    if (total_msgs == 0) throw std::runtime_error(one["bag"] + ": none of the rig's image topics is in the bag");
+    const std::string out = one["out"];
+    std::filesystem::create_directories(out);
+    const int max_sets = one.count("max-sets") ? std::stoi(one["max-sets"]) : -1;
+    std::map<ros::Time, std::vector<cv::Mat>> pending;
+    size_t seen = 0, done = 0, incomplete = 0;
+    const auto t0 = std::chrono::steady_clock::now();
+    for (const rosbag::MessageInstance& m : view) {
+      ++seen;
+      auto msg = m.instantiate<sensor_msgs::Image>();
+      if (!msg) continue;
+      const int cam = topic_cam[m.getTopic()];
+      auto& slot = pending[msg->header.stamp];
+      slot.resize(rig.cameras.size());
+      try {
+        slot[cam] = cv_bridge::toCvCopy(msg)->image;
+      } catch (const std::exception& e) {
+        std::cerr << "\nplane_sweep_depth: " << m.getTopic() << " at " << msg->header.stamp << ": " << e.what() << "\n";
+      }
+      bool complete = true;
+      for (const auto& im : slot) complete = complete && !im.empty();
+      if (!complete) continue;
+      std::vector<fm::SweepView> views;
+      for (size_t i = 0; i < rig.cameras.size(); ++i) {
+        if (static_cast<int>(i) != ref) views.push_back(fm::rigSweepView(rig, i, ref, slot[i]));
+      }
+      const fm::DepthResult r = sweep.compute(fm::rigSweepView(rig, ref, ref, slot[ref]), views, &T_base_ref);
+      std::ostringstream name;
+      name << out << "/depth_" << msg->header.stamp.sec << "." << std::setw(9) << std::setfill('0') << msg->header.stamp.nsec;
+      fm::writeDepthTiff(name.str() + ".tiff", r.depth);
+      ++done;
+      // Older incomplete sets will never complete (bags are in time order).
+      for (auto it = pending.begin(); it != pending.end() && it->first <= msg->header.stamp;) {
+        if (it->first < msg->header.stamp) ++incomplete;
+        it = pending.erase(it);
+      }
+      const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      std::cerr << "\r[" << std::setw(3) << 100 * seen / total_msgs << "%] " << done << " depth maps, "
+                << std::fixed << std::setprecision(2) << done / s << " sets/s" << std::flush;
+      if (max_sets > 0 && static_cast<int>(done) >= max_sets) break;
+    }
+    std::cerr << "\n";
+    std::cout << done << " depth maps written to " << out << " (" << incomplete + pending.size()
+              << " incomplete frame sets skipped)\n";
+    return 0;
+  } catch (const std::exception& e) {
+    std::cerr << "plane_sweep_depth: " << e.what() << "\n";
+    return 1;
+  }
+}

@@ -1,0 +1,79 @@
+// The offline plane_sweep_depth tool: rendered images in, a float TIFF of
+// range along the ray out (checked against the rendered truth); bad input
+// exits non-zero with a message naming the problem.
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include "fisheye_mapping/core/depth_image.h"
+#include "fisheye_mapping/core/rig.h"
+#include "fisheye_mapping/core/synthetic_world.h"
+
+namespace fm = fisheye_mapping;
+
+namespace {
+
+const std::string kData = FM_TEST_DATA_DIR;
+const std::string kRig = " --camchain " + kData + "/small_rig_camchain.yaml --mount " + kData + "/small_rig_mount.yaml";
+
+int run(const std::string& args, std::string* output) {
+  const std::string cmd = std::string(FM_PLANE_SWEEP_DEPTH) + args + " 2>&1";
+  FILE* p = popen(cmd.c_str(), "r");
+  char buf[4096];
+  output->clear();
+  while (fgets(buf, sizeof buf, p)) *output += buf;
+  return WEXITSTATUS(pclose(p));
+}
+
+}  // namespace
+
+TEST(PlaneSweepTool, ImagesToDepthTiff) {
+  const std::string dir = std::filesystem::temp_directory_path() / ("fm_psd_" + std::to_string(getpid()));
+  std::filesystem::create_directories(dir);
+  const fm::Rig rig = fm::loadKalibrRig(kData + "/small_rig_camchain.yaml", kData + "/small_rig_mount.yaml");
+  fm::synth::WorldConfig wc;
+  wc.seed = 2;
+  wc.route_length = 120;
+  const fm::synth::World world(wc);
+  std::string args = kRig + " --reference cam0 --set min_parallax_px=0.05 --set resolution=full --out " + dir + "/f";
+  cv::Mat truth;
+  for (size_t c = 0; c < rig.cameras.size(); ++c) {
+    const auto& cam = rig.cameras[c];
+    auto frame = world.render(cam.model, fm::pixelRays(cam.model), world.egoPose(3.0) * cam.T_base_cam, 3.0, 100 + c);
+    if (c == 0) truth = frame.depth;
+    cv::Mat img = frame.image;
+    if (c == 1) cv::cvtColor(img, img, cv::COLOR_GRAY2BGR);  // colour input is converted to grey
+    const std::string path = dir + "/" + cam.name + ".png";
+    ASSERT_TRUE(cv::imwrite(path, img));
+    args += " --image " + cam.name + "=" + path;
+  }
+  std::string out;
+  ASSERT_EQ(run(args, &out), 0) << out;
+  const cv::Mat depth = cv::imread(dir + "/f_depth.tiff", cv::IMREAD_UNCHANGED);
+  ASSERT_EQ(depth.type(), CV_32FC1);
+  ASSERT_EQ(depth.size(), truth.size());
+  const fm::DepthErrorStats e = fm::depthError(depth, truth, cv::Mat(), 15.0, 60.0);
+  EXPECT_GT(e.valid, 1000u);
+  EXPECT_LT(e.median, 0.2) << e.median;
+  EXPECT_FALSE(cv::imread(dir + "/f_depth.png").empty());
+
+  // Bad input.
+  EXPECT_EQ(run(kRig + " --image cam0=" + dir + "/missing.png --out " + dir + "/g", &out), 1);
+  EXPECT_NE(out.find("missing.png: cannot read image"), std::string::npos) << out;
+  cv::imwrite(dir + "/small.png", cv::Mat(50, 60, CV_8UC1, cv::Scalar(3)));
+  EXPECT_EQ(run(kRig + " --image cam0=" + dir + "/small.png --out " + dir + "/g", &out), 1);
+  EXPECT_NE(out.find("image is 60x50 but the calibration says 256x136"), std::string::npos) << out;
+  EXPECT_EQ(run(kRig + " --image cam9=" + dir + "/cam0.png --out " + dir + "/g", &out), 1);
+  EXPECT_NE(out.find("unknown camera 'cam9'"), std::string::npos) << out;
+  EXPECT_EQ(run(kRig + " --image cam0=" + dir + "/cam0.png --set window_full=4 --out " + dir + "/g", &out), 1);
+  EXPECT_NE(out.find("window_full"), std::string::npos) << out;
+  EXPECT_EQ(run(kRig + " --out " + dir + "/g", &out), 2);
+  std::filesystem::remove_all(dir);
+}
