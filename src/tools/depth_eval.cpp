@@ -277,7 +277,7 @@ int runVcharge(const std::map<std::string, std::string>& a) {
   config.device = get(a, "device", "-");
   if (config.device == "-") config.device.clear();
   config.ground_planes = 0;  // the system frame's ground is not known here
-  config.near = 1.0;
+  config.near = 0.4;  // PlaneSweepLib's reference run: 0.4 m (the camera looks down at the road)
   config.far = 100.0;
   config.min_parallax_px = 0.0;  // ~0.2 m between frames: small but all we have
   config.aggregation = "best_k";  // frames before and after: one of them sees occluded points
@@ -300,7 +300,7 @@ int runVcharge(const std::map<std::string, std::string>& a) {
   cv::cvtColor(images[ref].channels() == 1 ? images[ref] : images[ref], refc,
                images[ref].channels() == 1 ? cv::COLOR_GRAY2BGR : cv::COLOR_BGRA2BGR);
   tiles.push_back(refc);
-  const std::string psl = data + "/reference_psl_zncc/" + camera + "/BestK/invDepthCol.png";
+  const std::string psl = data + "/reference_psl_zncc/" + camera + "/grayscaleZNCC/BestK/invDepthCol.png";
   cv::Mat pslimg = cv::imread(psl, cv::IMREAD_COLOR);
   if (!pslimg.empty()) {
     cv::resize(pslimg, pslimg, refc.size());
