@@ -41,17 +41,21 @@ cv::Mat upsampleNearest(const cv::Mat& half, int width, int height) {
   return out;
 }
 
+// Throws "<view>: <what> is WxH, calibration says WxH" on a size mismatch.
+void checkSize(const SweepView& view, const cv::Mat& m, const char* what) {
+  if (m.cols == view.camera.width() && m.rows == view.camera.height()) return;
+  std::ostringstream os;
+  os << view.name << ": " << what << " is " << m.cols << "x" << m.rows << ", calibration says " << view.camera.width()
+     << "x" << view.camera.height();
+  throw std::invalid_argument(os.str());
+}
+
 cv::Mat checkedMask(const SweepView& view) {
   if (view.mask.empty()) return cv::Mat::zeros(view.camera.height(), view.camera.width(), CV_8UC1);
   if (view.mask.type() != CV_8UC1) {
     throw std::invalid_argument(view.name + ": self-mask must be an 8-bit single-channel image");
   }
-  if (view.mask.cols != view.camera.width() || view.mask.rows != view.camera.height()) {
-    std::ostringstream os;
-    os << view.name << ": self-mask is " << view.mask.cols << "x" << view.mask.rows << ", calibration says "
-       << view.camera.width() << "x" << view.camera.height();
-    throw std::invalid_argument(os.str());
-  }
+  checkSize(view, view.mask, "self-mask");
   return view.mask;
 }
 
@@ -61,12 +65,7 @@ void checkImage(const SweepView& view) {
   if (t != CV_8UC1 && t != CV_8UC3 && t != CV_8UC4 && t != CV_16UC1 && t != CV_32FC1) {
     throw std::invalid_argument(view.name + ": unsupported image type (expected 8-bit grey/BGR/BGRA, 16-bit grey or float)");
   }
-  if (view.image.cols != view.camera.width() || view.image.rows != view.camera.height()) {
-    std::ostringstream os;
-    os << view.name << ": image is " << view.image.cols << "x" << view.image.rows << ", calibration says "
-       << view.camera.width() << "x" << view.camera.height();
-    throw std::invalid_argument(os.str());
-  }
+  checkSize(view, view.image, "image");
 }
 
 // Window mean and standard deviation of a float image.
