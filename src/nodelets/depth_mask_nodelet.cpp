@@ -1,0 +1,137 @@
+// Depth mask nodelet: removes potentially moving objects from depth maps
+// before fusion (paper Sec. III-B).
+//
+// Subscribes  depth      (sensor_msgs/Image 32FC1, range along the ray, NaN invalid)
+//             detections (fisheye_mapping/Detection2DArray of the same camera)
+//             while someone listens to an output (lazy).
+// Publishes   depth_masked (32FC1: NaN inside every box grown by ~margin_px)
+//             depth_mask   (mono8: 255 where a box removed depth)
+//             both with the depth map's header.
+// Pairing     by exact stamp. A depth map waits up to ~wait_for_detections
+//             seconds (wall time) for its detections; then it passes through
+//             unmasked and the count of such frames is reported (warning).
+//             A frame whose detections are empty passes unchanged.
+// Parameters  ~margin_px (default 10), ~wait_for_detections (default 0.5 s),
+//             ~max_pending (default 30 depth maps / detection sets).
+#include <memory>
+#include <mutex>
+
+#include <cv_bridge/cv_bridge.h>
+#include <nodelet/nodelet.h>
+#include <pluginlib/class_list_macros.hpp>
+#include <ros/ros.h>
+#include <sensor_msgs/Image.h>
+#include <sensor_msgs/image_encodings.h>
+
+#include "fisheye_mapping/Detection2DArray.h"
+#include "fisheye_mapping/core/depth_mask.h"
+
+namespace fisheye_mapping {
+
+namespace enc = sensor_msgs::image_encodings;
+
+class DepthMaskNodelet : public nodelet::Nodelet {
+ private:
+  using Pairer = StampPairer<sensor_msgs::ImageConstPtr, Detection2DArrayConstPtr>;
+
+  void onInit() override {
+    ros::NodeHandle& nh = getNodeHandle();
+    ros::NodeHandle& pnh = getPrivateNodeHandle();
+    double wait = 0.5;
+    int max_pending = 30;
+    pnh.param("margin_px", margin_px_, 10.0);
+    pnh.param("wait_for_detections", wait, wait);
+    pnh.param("max_pending", max_pending, max_pending);
+    if (!(margin_px_ >= 0)) {
+      NODELET_ERROR("~margin_px %.1f is negative; using 0", margin_px_);
+      margin_px_ = 0;
+    }
+    if (!(wait >= 0)) {
+      NODELET_ERROR("~wait_for_detections %.3f is negative; using 0", wait);
+      wait = 0;
+    }
+    pairer_ = std::make_unique<Pairer>(wait, std::size_t(std::max(1, max_pending)));
+    auto connect = [this](const ros::SingleSubscriberPublisher&) { updateSubscription(); };
+    masked_pub_ = nh.advertise<sensor_msgs::Image>("depth_masked", 5, connect, connect);
+    mask_pub_ = nh.advertise<sensor_msgs::Image>("depth_mask", 5, connect, connect);
+    timer_ = nh.createWallTimer(ros::WallDuration(std::max(0.005, std::min(0.05, wait / 4))),
+                                [this](const ros::WallTimerEvent&) { onTimer(); });
+    NODELET_INFO("depth mask: margin %.1f px, waits %.3f s for detections", margin_px_, wait);
+  }
+
+  void updateSubscription() {
+    std::lock_guard<std::mutex> lock(connect_mutex_);
+    const bool wanted = masked_pub_.getNumSubscribers() > 0 || mask_pub_.getNumSubscribers() > 0;
+    if (wanted && !depth_sub_) {
+      depth_sub_ = getNodeHandle().subscribe("depth", 5, &DepthMaskNodelet::onDepth, this);
+      det_sub_ = getNodeHandle().subscribe("detections", 10, &DepthMaskNodelet::onDetections, this);
+    } else if (!wanted && depth_sub_) {
+      depth_sub_.shutdown();
+      det_sub_.shutdown();
+    }
+  }
+
+  static double now() { return ros::WallTime::now().toSec(); }
+
+  void onDepth(const sensor_msgs::ImageConstPtr& msg) {
+    if (msg->encoding != enc::TYPE_32FC1) {
+      NODELET_ERROR_THROTTLE(1.0, "depth at %.3f skipped: encoding '%s', expected 32FC1 (range along the ray)",
+                             msg->header.stamp.toSec(), msg->encoding.c_str());
+      return;
+    }
+    std::lock_guard<std::mutex> lock(mutex_);
+    publish(pairer_->addDepth(msg->header.stamp.toNSec(), msg, now()));
+  }
+
+  void onDetections(const Detection2DArrayConstPtr& msg) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    const auto late = pairer_->late();
+    publish(pairer_->addDetections(msg->header.stamp.toNSec(), msg, now()));
+    if (pairer_->late() != late)
+      NODELET_WARN_THROTTLE(5.0, "detections at %.3f came after their depth map had passed through (%lu so far)",
+                            msg->header.stamp.toSec(), (unsigned long)pairer_->late());
+  }
+
+  void onTimer() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    publish(pairer_->poll(now()));
+  }
+
+  void publish(const std::vector<Pairer::Pair>& pairs) {
+    for (const auto& p : pairs) {
+      try {
+        cv::Mat depth = cv_bridge::toCvCopy(p.depth)->image;
+        std::vector<Detection> boxes;
+        int w = depth.cols, h = depth.rows;
+        if (p.dets) {
+          const auto& d = **p.dets;
+          if (d.image_width > 0 && d.image_height > 0) w = int(d.image_width), h = int(d.image_height);
+          for (const auto& m : d.detections) {
+            Detection b;
+            b.x_min = m.x_min, b.y_min = m.y_min, b.x_max = m.x_max, b.y_max = m.y_max;
+            boxes.push_back(b);
+          }
+        } else {
+          NODELET_WARN_THROTTLE(5.0, "no detections for depth at %.3f within the wait; passed through unmasked "
+                                "(%lu so far)", p.depth->header.stamp.toSec(), (unsigned long)pairer_->timedOut());
+        }
+        const cv::Mat mask = maskDepthBoxes(depth, boxes, float(margin_px_), w, h);
+        masked_pub_.publish(cv_bridge::CvImage(p.depth->header, enc::TYPE_32FC1, depth).toImageMsg());
+        mask_pub_.publish(cv_bridge::CvImage(p.depth->header, enc::MONO8, mask).toImageMsg());
+      } catch (const std::exception& e) {
+        NODELET_ERROR_THROTTLE(1.0, "depth at %.3f skipped: %s", p.depth->header.stamp.toSec(), e.what());
+      }
+    }
+  }
+
+  double margin_px_ = 10.0;
+  std::unique_ptr<Pairer> pairer_;
+  std::mutex mutex_, connect_mutex_;
+  ros::Subscriber depth_sub_, det_sub_;
+  ros::Publisher masked_pub_, mask_pub_;
+  ros::WallTimer timer_;
+};
+
+}  // namespace fisheye_mapping
+
+PLUGINLIB_EXPORT_CLASS(fisheye_mapping::DepthMaskNodelet, nodelet::Nodelet)

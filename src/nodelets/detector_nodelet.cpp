@@ -1,0 +1,135 @@
+// Object detector nodelet: the core Detector (cv::dnn, YOLO family / NanoDet)
+// on one camera's images.
+//
+// Subscribes  image (sensor_msgs/Image mono8 / bgr8 / rgb8 / bgra8 / rgba8,
+//             through image_transport; ~image_transport selects the transport),
+//             only while someone listens to an output (lazy).
+// Publishes   detections       (fisheye_mapping/Detection2DArray) stamped with the
+//                               IMAGE's header (stamp and frame_id), not now()
+//             detections_image (sensor_msgs/Image bgr8, boxes drawn) when
+//                               ~publish_annotated is true
+// Parameters  ~model_config (model YAML, see config/detector/), ~dnn_backend
+//             (opencv | default), ~dnn_target (cpu | opencl | opencl_fp16),
+//             ~only_moving (true: publish the model's moving classes only),
+//             ~score_threshold / ~nms_threshold (override the YAML's).
+// A model that cannot be loaded is reported and the nodelet keeps running
+// (publishing nothing); bad images are reported and skipped.
+#include <memory>
+#include <mutex>
+
+#include <cv_bridge/cv_bridge.h>
+#include <image_transport/image_transport.h>
+#include <nodelet/nodelet.h>
+#include <pluginlib/class_list_macros.hpp>
+#include <sensor_msgs/image_encodings.h>
+
+#include "fisheye_mapping/Detection2DArray.h"
+#include "fisheye_mapping/core/detector.h"
+
+namespace fisheye_mapping {
+
+namespace enc = sensor_msgs::image_encodings;
+
+class DetectorNodelet : public nodelet::Nodelet {
+ private:
+  void onInit() override {
+    ros::NodeHandle& nh = getNodeHandle();
+    ros::NodeHandle& pnh = getPrivateNodeHandle();
+    pnh.param("only_moving", only_moving_, true);
+    pnh.param("publish_annotated", publish_annotated_, true);
+    pnh.param<std::string>("image_transport", transport_, "raw");
+    std::string model_config;
+    DnnDevice device;
+    pnh.param<std::string>("dnn_backend", device.backend, device.backend);
+    pnh.param<std::string>("dnn_target", device.target, device.target);
+    try {
+      if (!pnh.getParam("model_config", model_config))
+        throw std::runtime_error("~model_config (path of a model YAML, see config/detector/) is not set");
+      DetectorConfig cfg = loadDetectorConfig(model_config);
+      double v;
+      if (pnh.getParam("score_threshold", v)) cfg.score_threshold = float(v);
+      if (pnh.getParam("nms_threshold", v)) cfg.nms_threshold = float(v);
+      detector_ = std::make_unique<Detector>(cfg, device);
+      NODELET_INFO("detector: %s head, %dx%d input, %zu classes, backend %s target %s, model %s",
+                   headName(cfg.head), cfg.input_width, cfg.input_height, cfg.class_names.size(),
+                   device.backend.c_str(), device.target.c_str(), cfg.model_path.c_str());
+    } catch (const std::exception& e) {
+      load_error_ = e.what();
+      NODELET_ERROR("detector has no model and will publish nothing: %s", e.what());
+    }
+    it_ = std::make_unique<image_transport::ImageTransport>(nh);
+    auto connect = [this](const ros::SingleSubscriberPublisher&) { updateSubscription(); };
+    det_pub_ = nh.advertise<Detection2DArray>("detections", 5, connect, connect);
+    if (publish_annotated_) {
+      auto iconnect = [this](const image_transport::SingleSubscriberPublisher&) { updateSubscription(); };
+      image_pub_ = it_->advertise("detections_image", 2, iconnect, iconnect);
+    }
+  }
+
+  void updateSubscription() {
+    std::lock_guard<std::mutex> lock(connect_mutex_);
+    const bool wanted = det_pub_.getNumSubscribers() > 0 || (publish_annotated_ && image_pub_.getNumSubscribers() > 0);
+    if (wanted && !sub_) {
+      sub_ = it_->subscribe("image", 2, &DetectorNodelet::onImage, this, image_transport::TransportHints(transport_));
+    } else if (!wanted && sub_) {
+      sub_.shutdown();
+    }
+  }
+
+  void onImage(const sensor_msgs::ImageConstPtr& msg) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (!detector_) {
+      NODELET_ERROR_THROTTLE(5.0, "image at %.3f not processed: no model (%s)", msg->header.stamp.toSec(),
+                             load_error_.c_str());
+      return;
+    }
+    try {
+      const std::string& e = msg->encoding;
+      cv::Mat image;
+      if (e == enc::MONO8 || e == enc::BGR8 || e == enc::BGRA8) {
+        image = cv_bridge::toCvShare(msg)->image;
+      } else if (e == enc::RGB8 || e == enc::RGBA8) {
+        image = cv_bridge::toCvShare(msg, enc::BGR8)->image;
+      } else {
+        throw std::invalid_argument("unsupported encoding '" + e + "' (mono8, bgr8, rgb8, bgra8 or rgba8)");
+      }
+      const ros::WallTime t0 = ros::WallTime::now();
+      const std::vector<Detection> dets = detector_->detect(image, only_moving_);
+      NODELET_DEBUG("%zu detections in %.1f ms", dets.size(), (ros::WallTime::now() - t0).toSec() * 1e3);
+      Detection2DArray out;
+      out.header = msg->header;  // the image's stamp and frame
+      out.image_width = image.cols;
+      out.image_height = image.rows;
+      for (const auto& d : dets) {
+        Detection2D m;
+        m.x_min = d.x_min;
+        m.y_min = d.y_min;
+        m.x_max = d.x_max;
+        m.y_max = d.y_max;
+        m.class_id = d.class_id;
+        m.class_name = d.class_name;
+        m.score = d.score;
+        out.detections.push_back(m);
+      }
+      det_pub_.publish(out);
+      if (publish_annotated_ && image_pub_.getNumSubscribers() > 0)
+        image_pub_.publish(cv_bridge::CvImage(msg->header, enc::BGR8, annotateDetections(image, dets)).toImageMsg());
+    } catch (const std::exception& ex) {
+      NODELET_ERROR_THROTTLE(1.0, "image at %.3f (%ux%u) skipped: %s", msg->header.stamp.toSec(), msg->width,
+                             msg->height, ex.what());
+    }
+  }
+
+  std::unique_ptr<Detector> detector_;
+  std::string load_error_, transport_;
+  bool only_moving_ = true, publish_annotated_ = true;
+  std::unique_ptr<image_transport::ImageTransport> it_;
+  image_transport::Subscriber sub_;
+  image_transport::Publisher image_pub_;
+  ros::Publisher det_pub_;
+  std::mutex mutex_, connect_mutex_;
+};
+
+}  // namespace fisheye_mapping
+
+PLUGINLIB_EXPORT_CLASS(fisheye_mapping::DetectorNodelet, nodelet::Nodelet)
