@@ -7,6 +7,7 @@
 #include <chrono>
 
 #include <cmath>
+#include <limits>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -38,6 +39,7 @@ void TsdfConfig::validate() const {
   positive("local_map_size.z", local_map_size.z());
   if (!local_map_offset.allFinite()) throw std::invalid_argument("TsdfConfig.local_map_offset must be finite");
   if (min_observations < 1) throw std::invalid_argument("TsdfConfig.min_observations must be >= 1");
+  if (!(max_range >= 0.0)) throw std::invalid_argument("TsdfConfig.max_range must be >= 0 (0: no limit)");
   if (threads < 0) throw std::invalid_argument("TsdfConfig.threads must be >= 0");
   if (integrator != "cpu" && integrator != "opencl") {
     throw std::invalid_argument("TsdfConfig.integrator must be 'cpu' or 'opencl', got '" + integrator + "'");
@@ -156,7 +158,12 @@ IntegrationStats TsdfMap::integrate(const cv::Mat& depth, const CameraModel& cam
 
   // 1. Allocation: blocks crossed by each valid ray between d - mu and d + mu.
   const RayTable& table = raysFor(camera);
-  const cv::Mat depth_c = depth.isContinuous() ? depth : depth.clone();
+  cv::Mat depth_c = depth.isContinuous() ? depth : depth.clone();
+  if (config_.max_range > 0.0) {  // beyond max_range: no measurement
+    if (depth_c.data == depth.data) depth_c = depth.clone();
+    cv::Mat far = depth_c > config_.max_range;
+    depth_c.setTo(std::numeric_limits<float>::quiet_NaN(), far);
+  }
   const float* d_ptr = depth_c.ptr<float>();
   const float mu = static_cast<float>(config_.truncation());
   const float inv_block = static_cast<float>(1.0 / config_.blockSize());

@@ -6,7 +6,9 @@
 //             while someone listens to an output (lazy).
 // Publishes   depth_masked (32FC1: NaN inside every box grown by ~margin_px)
 //             depth_mask   (mono8: 255 where a box removed depth)
-//             both with the depth map's header.
+//             depth_masked_colour (bgr8: colour-coded masked depth, black
+//                          invalid; only while subscribed; ~colour_range [near, far])
+//             all with the depth map's header.
 // Pairing     by exact stamp. A depth map waits up to ~wait_for_detections
 //             seconds (wall time) for its detections; then it passes through
 //             unmasked and the count of such frames is reported (warning).
@@ -24,6 +26,7 @@
 #include <sensor_msgs/image_encodings.h>
 
 #include "fisheye_mapping/Detection2DArray.h"
+#include "fisheye_mapping/core/depth_image.h"
 #include "fisheye_mapping/core/depth_mask.h"
 
 namespace fisheye_mapping {
@@ -54,6 +57,11 @@ class DepthMaskNodelet : public nodelet::Nodelet {
     auto connect = [this](const ros::SingleSubscriberPublisher&) { updateSubscription(); };
     masked_pub_ = nh.advertise<sensor_msgs::Image>("depth_masked", 5, connect, connect);
     mask_pub_ = nh.advertise<sensor_msgs::Image>("depth_mask", 5, connect, connect);
+    colour_pub_ = nh.advertise<sensor_msgs::Image>("depth_masked_colour", 2, connect, connect);
+    std::vector<double> range;
+    if (pnh.getParam("colour_range", range) && range.size() == 2 && range[0] > 0 && range[1] > range[0]) {
+      colour_near_ = range[0], colour_far_ = range[1];
+    }
     timer_ = nh.createWallTimer(ros::WallDuration(std::max(0.005, std::min(0.05, wait / 4))),
                                 [this](const ros::WallTimerEvent&) { onTimer(); });
     NODELET_INFO("depth mask: margin %.1f px, waits %.3f s for detections", margin_px_, wait);
@@ -61,7 +69,8 @@ class DepthMaskNodelet : public nodelet::Nodelet {
 
   void updateSubscription() {
     std::lock_guard<std::mutex> lock(connect_mutex_);
-    const bool wanted = masked_pub_.getNumSubscribers() > 0 || mask_pub_.getNumSubscribers() > 0;
+    const bool wanted = masked_pub_.getNumSubscribers() > 0 || mask_pub_.getNumSubscribers() > 0 ||
+                        colour_pub_.getNumSubscribers() > 0;
     if (wanted && !depth_sub_) {
       depth_sub_ = getNodeHandle().subscribe("depth", 5, &DepthMaskNodelet::onDepth, this);
       det_sub_ = getNodeHandle().subscribe("detections", 10, &DepthMaskNodelet::onDetections, this);
@@ -118,17 +127,20 @@ class DepthMaskNodelet : public nodelet::Nodelet {
         const cv::Mat mask = maskDepthBoxes(depth, boxes, float(margin_px_), w, h);
         masked_pub_.publish(cv_bridge::CvImage(p.depth->header, enc::TYPE_32FC1, depth).toImageMsg());
         mask_pub_.publish(cv_bridge::CvImage(p.depth->header, enc::MONO8, mask).toImageMsg());
+        if (colour_pub_.getNumSubscribers() > 0)
+          colour_pub_.publish(
+              cv_bridge::CvImage(p.depth->header, enc::BGR8, colorizeDepth(depth, colour_near_, colour_far_)).toImageMsg());
       } catch (const std::exception& e) {
         NODELET_ERROR_THROTTLE(1.0, "depth at %.3f skipped: %s", p.depth->header.stamp.toSec(), e.what());
       }
     }
   }
 
-  double margin_px_ = 10.0;
+  double margin_px_ = 10.0, colour_near_ = 1.0, colour_far_ = 30.0;
   std::unique_ptr<Pairer> pairer_;
   std::mutex mutex_, connect_mutex_;
   ros::Subscriber depth_sub_, det_sub_;
-  ros::Publisher masked_pub_, mask_pub_;
+  ros::Publisher masked_pub_, mask_pub_, colour_pub_;
   ros::WallTimer timer_;
 };
 

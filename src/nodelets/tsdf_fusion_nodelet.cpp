@@ -58,6 +58,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     pnh.param("max_weight", max_weight, max_weight);
     cfg.max_weight = static_cast<float>(max_weight);
     pnh.param("min_observations", cfg.min_observations, cfg.min_observations);
+    pnh.param("max_range", cfg.max_range, cfg.max_range);
     std::vector<double> size{cfg.local_map_size.x(), cfg.local_map_size.y(), cfg.local_map_size.z()};
     pnh.param("local_map_size", size, size);
     std::vector<double> offset{cfg.local_map_offset.x(), cfg.local_map_offset.y(), cfg.local_map_offset.z()};

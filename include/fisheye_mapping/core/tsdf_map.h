@@ -29,6 +29,7 @@ struct TsdfConfig {
   double truncation_voxels = 4.0;  // mu = truncation_voxels * voxel_size
   float max_weight = 100.0f;       // cap of the per-voxel observation count
   int min_observations = 3;        // outputs keep voxels observed at least this often
+  double max_range = 0.0;          // depth beyond this many metres is not fused (0: no limit)
   // Active box around the vehicle (world axes): centre = vehicle + offset.
   Eigen::Vector3d local_map_size = Eigen::Vector3d(60.0, 60.0, 3.0);
   Eigen::Vector3d local_map_offset = Eigen::Vector3d(0.0, 0.0, 1.0);

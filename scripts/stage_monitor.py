@@ -1,0 +1,76 @@
+#!/usr/bin/env python3
+"""Counts what each stage of vehicle.launch puts out, until the pipeline goes idle.
+
+usage: stage_monitor.py --out SUMMARY.md [--idle S] [--timeout S] [--wait-first S]
+
+Subscribes (as AnyMsg, nothing is deserialized) to the frame sets, depth,
+detections, masked depth, mesh and cloud topics; stops when no message arrived
+on any of them for --idle seconds (wall time) after the first one, or after
+--timeout; writes a markdown table: messages per topic, output rate over the
+active span, first and last stamp. Exit status 1 when nothing arrived.
+"""
+import argparse
+import sys
+import time
+
+import rospy
+from rospy.msg import AnyMsg
+
+TOPICS = [
+    ("/cam0/image_raw", "reference images in"),
+    ("/frames", "sync: frame sets"),
+    ("/depth", "plane sweep: depth"),
+    ("/detections", "detector: detections"),
+    ("/cam0/detections_gt", "ground-truth boxes (oracle)"),
+    ("/depth_masked", "mask: masked depth"),
+    ("/mesh", "fusion: mesh updates"),
+    ("/cloud", "fusion: cloud updates"),
+]
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--idle", type=float, default=20.0)
+    ap.add_argument("--timeout", type=float, default=1800.0)
+    ap.add_argument("--wait-first", type=float, default=120.0)
+    args = ap.parse_args(rospy.myargv()[1:])
+    rospy.init_node("stage_monitor", anonymous=True, disable_signals=True)
+    stats = {t: {"n": 0, "first": None, "last": None} for t, _ in TOPICS}
+
+    def cb(msg, topic):
+        s = stats[topic]
+        now = time.time()
+        s["n"] += 1
+        s["first"] = s["first"] or now
+        s["last"] = now
+
+    subs = [rospy.Subscriber(t, AnyMsg, cb, callback_args=t, queue_size=50) for t, _ in TOPICS]
+    start = time.time()
+    while True:
+        time.sleep(0.5)
+        now = time.time()
+        lasts = [s["last"] for s in stats.values() if s["last"]]
+        if not lasts and now - start > args.wait_first:
+            break
+        if lasts and now - max(lasts) > args.idle:
+            break
+        if now - start > args.timeout:
+            break
+    for s in subs:
+        s.unregister()
+    lines = ["| stage | topic | messages | rate (Hz, over its active span) |", "|---|---|---:|---:|"]
+    for t, what in TOPICS:
+        s = stats[t]
+        span = (s["last"] - s["first"]) if s["n"] > 1 else 0.0
+        rate = f"{(s['n'] - 1) / span:.2f}" if span > 0 else "-"
+        lines.append(f"| {what} | `{t}` | {s['n']} | {rate} |")
+    text = "\n".join(lines) + "\n"
+    with open(args.out, "w") as f:
+        f.write(text)
+    print(text)
+    return 0 if any(s["n"] for s in stats.values()) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
