@@ -51,21 +51,6 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
   void onInit() override {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
-    TsdfConfig cfg;
-    pnh.param("voxel_size", cfg.voxel_size, cfg.voxel_size);
-    pnh.param("truncation_voxels", cfg.truncation_voxels, cfg.truncation_voxels);
-    double max_weight = cfg.max_weight;
-    pnh.param("max_weight", max_weight, max_weight);
-    cfg.max_weight = static_cast<float>(max_weight);
-    pnh.param("min_observations", cfg.min_observations, cfg.min_observations);
-    pnh.param("max_range", cfg.max_range, cfg.max_range);
-    std::vector<double> size{cfg.local_map_size.x(), cfg.local_map_size.y(), cfg.local_map_size.z()};
-    pnh.param("local_map_size", size, size);
-    std::vector<double> offset{cfg.local_map_offset.x(), cfg.local_map_offset.y(), cfg.local_map_offset.z()};
-    pnh.param("local_map_offset", offset, offset);
-    pnh.param("swap_directory", cfg.swap_directory, cfg.swap_directory);
-    pnh.param("integrator", cfg.integrator, cfg.integrator);
-    pnh.param("opencl_device", cfg.opencl_device, cfg.opencl_device);
     pnh.param("world_frame", world_frame_, std::string("map"));
     pnh.param("base_frame", base_frame_, std::string("base_link"));
     pnh.param("save_map_on_shutdown", save_on_shutdown_, std::string());
@@ -74,10 +59,9 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     pnh.param("publish_period", publish_period, publish_period);
     int queue_size = 10;
     pnh.param("queue_size", queue_size, queue_size);
+    TsdfConfig cfg;
     try {
-      if (size.size() != 3 || offset.size() != 3) throw std::invalid_argument("~local_map_size and ~local_map_offset need 3 values");
-      cfg.local_map_size = Eigen::Vector3d(size[0], size[1], size[2]);
-      cfg.local_map_offset = Eigen::Vector3d(offset[0], offset[1], offset[2]);
+      cfg = tsdfConfigFrom(RosParams(pnh));
       rig_ = loadRigFromParams(pnh);
       map_ = std::make_unique<TsdfMap>(cfg);
     } catch (const std::exception& e) {
@@ -113,7 +97,8 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     services_.push_back(pnh.advertiseService("clear_map", &TsdfFusionNodelet::clearMap, this));
     timer_ = nh.createWallTimer(ros::WallDuration(publish_period), [this](const ros::WallTimerEvent&) { publish(); });
     NODELET_INFO("TSDF fusion: voxel %.3f m, truncation %.3f m, local map %.0fx%.0fx%.0f m, %s integrator",
-                 cfg.voxel_size, cfg.truncation(), size[0], size[1], size[2], cfg.integrator.c_str());
+                 cfg.voxel_size, cfg.truncation(), cfg.local_map_size.x(), cfg.local_map_size.y(), cfg.local_map_size.z(),
+                 cfg.integrator.c_str());
   }
 
   void onDepth(const sensor_msgs::ImageConstPtr& msg) {
