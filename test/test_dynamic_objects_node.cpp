@@ -15,17 +15,12 @@
 #include <map>
 
 #include "fisheye_mapping/Detection2DArray.h"
+#include "ros_test_utils.h"
 
 namespace {
 
-bool waitFor(const std::function<bool()>& done, double seconds) {
-  const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(seconds);
-  while (ros::ok() && ros::WallTime::now() < end) {
-    if (done()) return true;
-    ros::WallDuration(0.02).sleep();
-  }
-  return done();
-}
+using fisheye_mapping::test::waitFor;
+
 
 sensor_msgs::ImagePtr imageMsg(const cv::Mat& m, const std::string& encoding, const ros::Time& stamp) {
   std_msgs::Header h;

@@ -11,19 +11,14 @@
 #include "fisheye_mapping/core/depth_image.h"
 #include "fisheye_mapping/core/rig.h"
 #include "fisheye_mapping/core/synthetic_world.h"
+#include "ros_test_utils.h"
 
 namespace fm = fisheye_mapping;
 
 namespace {
 
-bool waitFor(const std::function<bool()>& done, double seconds) {
-  const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(seconds);
-  while (ros::ok() && ros::WallTime::now() < end) {
-    if (done()) return true;
-    ros::WallDuration(0.02).sleep();
-  }
-  return done();
-}
+using fisheye_mapping::test::waitFor;
+
 
 }  // namespace
 

@@ -19,10 +19,13 @@
 #include "fisheye_mapping/FilePath.h"
 #include "fisheye_mapping/core/analytic_scene.h"
 #include "fisheye_mapping/core/rig.h"
+#include "ros_test_utils.h"
 
 namespace fm = fisheye_mapping;
 
 namespace {
+
+using fisheye_mapping::test::waitFor;
 
 fm::analytic::Scene scene() {
   fm::analytic::Scene s;
@@ -35,14 +38,6 @@ fm::analytic::Scene scene() {
 sensor_msgs::PointCloud2ConstPtr last_cloud;
 visualization_msgs::MarkerArrayConstPtr last_mesh;
 
-bool waitFor(const std::function<bool()>& done, double seconds) {
-  const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(seconds);
-  while (ros::ok() && ros::WallTime::now() < end) {
-    if (done()) return true;
-    ros::WallDuration(0.05).sleep();
-  }
-  return done();
-}
 
 class TsdfFusionNode : public ::testing::Test {
  protected:

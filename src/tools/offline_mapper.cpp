@@ -7,10 +7,14 @@
 //
 //   offline_mapper --bag B --camchain F --mount F --out DIR
 //                  [--config vehicle.yaml] [--detector none|ground_truth|nanodet|darknet|MODEL.yaml]
-//                  [--frames N] [--every K] [--world map] [--quiet]
+//                  [--frames N] [--every K] [--world map] [--depth sweep|gt] [--quiet]
 //
-// Writes DIR/mesh.ply, DIR/cloud.pcd, DIR/timings.md (ms per stage) and
-// DIR/timings.csv (one row per frame set). Parameters: the stage defaults of
+// Writes DIR/mesh.ply, DIR/cloud.pcd, DIR/cloud_all.pcd (every voxel with a
+// surface, i.e. without the minimum-observation filter), DIR/timings.md (ms
+// per stage) and DIR/timings.csv (one row per frame set).
+// --depth gt fuses the bag's ground-truth depth of the reference camera
+// (/<ref>/depth_gt) instead of the plane sweep: the reference map of the
+// evaluation (moving objects masked the same way). Parameters: the stage defaults of
 // config/plane_sweep_depth.yaml and config/tsdf_fusion.yaml, then the
 // `plane_sweep`, `depth_mask` and `tsdf` sections of --config.
 #include <rosbag/bag.h>
@@ -82,7 +86,7 @@ double median(std::vector<double> v) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string bag_path, camchain, mount, out, config_path, detector = "ground_truth", world = "map";
+  std::string bag_path, camchain, mount, out, config_path, detector = "ground_truth", world = "map", depth_src = "sweep";
   std::string config_dir = FM_CONFIG_DIR;
   int max_frames = 0, every = 1;
   bool quiet = false;
@@ -105,13 +109,14 @@ int main(int argc, char** argv) {
     else if (a == "--frames") max_frames = std::atoi(next().c_str());
     else if (a == "--every") every = std::max(1, std::atoi(next().c_str()));
     else if (a == "--world") world = next();
+    else if (a == "--depth") depth_src = next();
     else if (a == "--quiet") quiet = true;
     else {
       usage();
       return 2;
     }
   }
-  if (bag_path.empty() || camchain.empty() || mount.empty() || out.empty()) {
+  if (bag_path.empty() || camchain.empty() || mount.empty() || out.empty() || (depth_src != "sweep" && depth_src != "gt")) {
     usage();
     return 2;
   }
@@ -126,6 +131,7 @@ int main(int argc, char** argv) {
     const fm::TsdfConfig tsdf_cfg = fm::tsdfConfigFrom(tsdf_p);
     fm::TsdfMap map(tsdf_cfg);
     fm::TsdfMesher mesher(tsdf_cfg.min_observations);
+    fm::TsdfMesher mesher_all(1);  // no minimum-observation filter
     double margin = 10.0;
     mask_p.get("margin_px", margin);
     std::string ref_name = "cam0";
@@ -151,6 +157,7 @@ int main(int argc, char** argv) {
     tf2::BufferCore tf(ros::Duration(1e6));
     std::map<uint64_t, fm::Detection2DArray::ConstPtr> gt_boxes;
     const std::string gt_topic = "/" + rig.cameras[ref].name + "/detections_gt";
+    const std::string gt_depth_topic = "/" + rig.cameras[ref].name + "/depth_gt";
     size_t tf_msgs = 0;
     for (const rosbag::MessageInstance& m : rosbag::View(bag, rosbag::TopicQuery({"/tf", "/tf_static", gt_topic}))) {
       if (auto t = m.instantiate<tf2_msgs::TFMessage>()) {
@@ -173,10 +180,17 @@ int main(int argc, char** argv) {
       topics.push_back(t);
       cam_of[t] = int(c);
     }
+    if (depth_src == "gt") {  // ground-truth depth stands in for the whole frame set
+      topics = {gt_depth_topic};
+      cam_of = {{gt_depth_topic, 0}};
+    }
     rosbag::View images(bag, rosbag::TopicQuery(topics));
-    size_t total_sets = images.size() / rig.cameras.size() / every;
+    if (images.size() == 0) throw std::runtime_error(bag_path + " has none of the topics " + topics[0] + " ...");
+    size_t total_sets = images.size() / (depth_src == "gt" ? 1 : rig.cameras.size()) / every;
     if (max_frames > 0) total_sets = std::min<size_t>(total_sets, max_frames);
-    fm::FrameSetSync<sensor_msgs::Image::ConstPtr> sync(int(rig.cameras.size()), fm::SyncPolicy::Exact, 0.0, 10);
+    fm::FrameSetSync<sensor_msgs::Image::ConstPtr> sync(depth_src == "gt" ? 1 : int(rig.cameras.size()),
+                                                        fm::SyncPolicy::Exact, 0.0, 10);
+    const int ref_slot = depth_src == "gt" ? 0 : ref;
     std::ofstream csv(out + "/timings.csv");
     csv << "stamp,sweep_ms,detect_ms,mask_ms,fuse_ms,total_ms,valid_pixels,masked_pixels\n";
     std::vector<double> t_sweep, t_det, t_mask, t_fuse, t_total;
@@ -190,7 +204,7 @@ int main(int argc, char** argv) {
         if (sets_seen++ % every != 0) continue;
         if (max_frames > 0 && int(processed) >= max_frames) break;
         const auto t0 = Clock::now();
-        const ros::Time stamp = set[ref]->header.stamp;
+        const ros::Time stamp = set[ref_slot]->header.stamp;
         Eigen::Isometry3d T_W_B;
         try {
           T_W_B = tf2::transformToEigen(tf.lookupTransform(world, rig.base_frame, stamp));
@@ -199,22 +213,30 @@ int main(int argc, char** argv) {
           if (!quiet) std::fprintf(stderr, "\nframe set %.3f skipped: no pose (%s)\n", stamp.toSec(), e.what());
           continue;
         }
-        std::vector<fm::SweepView> views;
         auto toMat = [](const sensor_msgs::Image::ConstPtr& im) {
           return cv_bridge::toCvShare(im, im->encoding == "mono8" ? "mono8" : "bgr8")->image;
         };
-        const fm::SweepView ref_view = fm::rigSweepView(rig, ref, ref, toMat(set[ref]));
-        for (int c = 0; c < int(set.size()); ++c)
-          if (c != ref) views.push_back(fm::rigSweepView(rig, c, ref, toMat(set[c])));
-        const Eigen::Isometry3d T_base_ref = rig.cameras[ref].T_base_cam;
         const auto ts = Clock::now();
-        fm::DepthResult r = sweep.compute(ref_view, views, &T_base_ref);
+        fm::DepthResult r;
+        if (depth_src == "gt") {
+          if (set[0]->encoding != "32FC1") throw std::runtime_error(gt_depth_topic + " is not 32FC1");
+          r.depth = cv_bridge::toCvCopy(set[0])->image;
+        } else {
+          std::vector<fm::SweepView> views;
+          const fm::SweepView ref_view = fm::rigSweepView(rig, ref, ref, toMat(set[ref]));
+          for (int c = 0; c < int(set.size()); ++c)
+            if (c != ref) views.push_back(fm::rigSweepView(rig, c, ref, toMat(set[c])));
+          const Eigen::Isometry3d T_base_ref = rig.cameras[ref].T_base_cam;
+          r = sweep.compute(ref_view, views, &T_base_ref);
+        }
         const double sweep_ms = msSince(ts);
         // Moving objects.
         const auto td = Clock::now();
         std::vector<fm::Detection> boxes;
         int bw = r.depth.cols, bh = r.depth.rows;
-        if (det) {
+        if (det && depth_src == "gt") {
+          throw std::runtime_error("--depth gt works with --detector ground_truth or none (no images are read)");
+        } else if (det) {
           const cv::Mat ref_img = toMat(set[ref]);
           boxes = det->detect(ref_img, true);
           bw = ref_img.cols, bh = ref_img.rows;
@@ -262,6 +284,8 @@ int main(int argc, char** argv) {
     const double wall = std::chrono::duration<double>(Clock::now() - run_start).count();
     mesher.saveMeshPly(out + "/mesh.ply");
     mesher.saveCloudPcd(out + "/cloud.pcd");
+    mesher_all.rebuild(map);  // every block of both stores, after the last frame
+    mesher_all.saveCloudPcd(out + "/cloud_all.pcd");
     const auto& s = sync.stats();
     std::ofstream md(out + "/timings.md");
     char buf[512];
@@ -271,7 +295,7 @@ int main(int argc, char** argv) {
                     std::accumulate(v.begin(), v.end(), 0.0) / v.size());
       md << buf;
     };
-    row("plane-sweep depth", t_sweep);
+    row(depth_src == "gt" ? "ground-truth depth (read)" : "plane-sweep depth", t_sweep);
     row(det ? "detection" : "ground-truth boxes", t_det);
     row("masking", t_mask);
     row("TSDF fusion + mesh update", t_fuse);
@@ -286,7 +310,7 @@ int main(int argc, char** argv) {
     md.close();
     std::ifstream in(out + "/timings.md");
     std::cout << in.rdbuf();
-    std::cout << "wrote " << out << "/mesh.ply, cloud.pcd, timings.md, timings.csv\n";
+    std::cout << "wrote " << out << "/mesh.ply, cloud.pcd, cloud_all.pcd, timings.md, timings.csv\n";
   } catch (const std::exception& e) {
     std::cerr << "\noffline_mapper: " << e.what() << "\n";
     return 1;
