@@ -136,3 +136,19 @@ TEST(MeshDistance, PointToTriangleByHand) {
   EXPECT_DOUBLE_EQ(m.fractionWithin({{0.2f, 0.2f, 0.05f}, {0.2f, 0.2f, 0.2f}, {5, 5, 5}, {0.1f, 0.1f, -0.09f}}, 0.1f),
                    0.5);
 }
+
+TEST(MapMetrics, NearestDistancesAndSharesByHand) {
+  const std::vector<Eigen::Vector3f> ours = {{0, 0, 0}, {1, 0, 0}, {0, 2, 0}};
+  const std::vector<Eigen::Vector3f> ref = {{0, 0, 0.05f}, {1, 0.3f, 0}, {5, 5, 5}, {0, 2.2f, 0}};
+  const auto acc = nearestDistances(ours, ref);  // 0.05, 0.3, 0.2
+  ASSERT_EQ(acc.size(), 3u);
+  EXPECT_NEAR(acc[0], 0.05f, 1e-6);
+  EXPECT_NEAR(acc[1], 0.3f, 1e-6);
+  EXPECT_NEAR(acc[2], 0.2f, 1e-6);
+  const auto comp = nearestDistances(ref, ours);  // 0.05, 0.3, |(5,5,5)-(0,2,0)|, 0.2
+  EXPECT_NEAR(comp[2], std::sqrt(25.f + 9.f + 25.f), 1e-5);
+  EXPECT_DOUBLE_EQ(shareWithin(acc, 0.1f), 1.0 / 3);   // accuracy at 0.1 m
+  EXPECT_DOUBLE_EQ(shareWithin(comp, 0.25f), 0.5);     // completeness at 0.25 m
+  EXPECT_DOUBLE_EQ(shareWithin({}, 0.1f), 0.0);
+  EXPECT_TRUE(std::isinf(nearestDistances(ours, {})[0]));
+}

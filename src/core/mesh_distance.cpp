@@ -3,6 +3,7 @@
 #include <pcl/PolygonMesh.h>
 #include <pcl/conversions.h>
 #include <pcl/io/ply_io.h>
+#include <pcl/kdtree/kdtree_flann.h>
 #include <pcl/point_types.h>
 
 #include <cmath>
@@ -96,6 +97,32 @@ double MeshDistance::fractionWithin(const std::vector<Eigen::Vector3f>& points, 
 #pragma omp parallel for reduction(+ : n)
   for (long i = 0; i < long(points.size()); ++i) n += distance(points[i]) <= t;
   return double(n) / points.size();
+}
+
+}  // namespace fisheye_mapping
+
+namespace fisheye_mapping {
+
+std::vector<float> nearestDistances(const std::vector<Eigen::Vector3f>& from, const std::vector<Eigen::Vector3f>& to) {
+  std::vector<float> d(from.size(), std::numeric_limits<float>::infinity());
+  if (to.empty()) return d;
+  pcl::PointCloud<pcl::PointXYZ>::Ptr cloud(new pcl::PointCloud<pcl::PointXYZ>);
+  cloud->reserve(to.size());
+  for (const auto& p : to) cloud->push_back(pcl::PointXYZ(p.x(), p.y(), p.z()));
+  pcl::KdTreeFLANN<pcl::PointXYZ> tree;
+  tree.setInputCloud(cloud);
+  std::vector<int> idx(1);
+  std::vector<float> sq(1);
+  for (size_t i = 0; i < from.size(); ++i)
+    if (tree.nearestKSearch(pcl::PointXYZ(from[i].x(), from[i].y(), from[i].z()), 1, idx, sq) > 0) d[i] = std::sqrt(sq[0]);
+  return d;
+}
+
+double shareWithin(const std::vector<float>& distances, float t) {
+  if (distances.empty()) return 0.0;
+  std::size_t n = 0;
+  for (float v : distances) n += v <= t;
+  return double(n) / distances.size();
 }
 
 }  // namespace fisheye_mapping

@@ -12,7 +12,6 @@
 //         t of the reference, completeness = share of the reference's points
 //         within t of the map (nearest neighbours by PCL's kd-tree)
 #include <pcl/io/pcd_io.h>
-#include <pcl/kdtree/kdtree_flann.h>
 #include <pcl/point_types.h>
 
 #include <cmath>
@@ -38,25 +37,14 @@ Cloud::Ptr load(const std::string& path) {
   return c;
 }
 
-// Distance from every point of `from` to its nearest neighbour in `to`.
-std::vector<float> nearest(const Cloud& from, const Cloud::Ptr& to) {
-  std::vector<float> d(from.size(), std::numeric_limits<float>::infinity());
-  if (to->empty()) return d;
-  pcl::KdTreeFLANN<pcl::PointXYZ> tree;
-  tree.setInputCloud(to);
-  std::vector<int> idx(1);
-  std::vector<float> sq(1);
-  for (size_t i = 0; i < from.size(); ++i)
-    if (tree.nearestKSearch(from[i], 1, idx, sq) > 0) d[i] = std::sqrt(sq[0]);
-  return d;
+std::vector<Eigen::Vector3f> points(const Cloud& c) {
+  std::vector<Eigen::Vector3f> v;
+  v.reserve(c.size());
+  for (const auto& p : c) v.emplace_back(p.x, p.y, p.z);
+  return v;
 }
 
-double share(const std::vector<float>& d, float t) {
-  if (d.empty()) return 0.0;
-  size_t n = 0;
-  for (float v : d) n += v <= t;
-  return double(n) / d.size();
-}
+double share(const std::vector<float>& d, float t) { return fm::shareWithin(d, t); }
 
 void usage() {
   std::cerr << "usage: map_accuracy --cloud MAP.pcd [--mesh SCENE.ply] [--ref REF.pcd] [--t 0.05,0.1,...]\n"
@@ -108,8 +96,9 @@ int main(int argc, char** argv) {
     Cloud::Ptr ref;
     if (!ref_path.empty()) {
       ref = load(ref_path);
-      acc_ref = nearest(*map, ref);
-      comp_ref = nearest(*ref, map);
+      const auto m = points(*map), r = points(*ref);
+      acc_ref = fm::nearestDistances(m, r);
+      comp_ref = fm::nearestDistances(r, m);
     }
     std::printf("%zu map points%s%s\n", map->size(), ref ? (", " + std::to_string(ref->size()) + " reference points").c_str() : "",
                 trail_tol > 0 ? (", " + std::to_string(trails) + " points farther than " + std::to_string(trail_tol) +

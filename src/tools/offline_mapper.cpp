@@ -30,6 +30,7 @@
 #include <chrono>
 #include <cstdio>
 #include <fstream>
+#include <functional>
 #include <iostream>
 #include <map>
 #include <memory>
@@ -282,10 +283,18 @@ int main(int argc, char** argv) {
     if (!quiet) std::fprintf(stderr, "\n");
     if (processed == 0) throw std::runtime_error("no complete frame set with a pose in " + bag_path);
     const double wall = std::chrono::duration<double>(Clock::now() - run_start).count();
-    mesher.saveMeshPly(out + "/mesh.ply");
-    mesher.saveCloudPcd(out + "/cloud.pcd");
     mesher_all.rebuild(map);  // every block of both stores, after the last frame
-    mesher_all.saveCloudPcd(out + "/cloud_all.pcd");
+    for (const auto& [what, save] : std::vector<std::pair<std::string, std::function<void()>>>{
+             {"mesh.ply", [&] { mesher.saveMeshPly(out + "/mesh.ply"); }},
+             {"cloud.pcd", [&] { mesher.saveCloudPcd(out + "/cloud.pcd"); }},
+             {"cloud_all.pcd", [&] { mesher_all.saveCloudPcd(out + "/cloud_all.pcd"); }}}) {
+      try {
+        std::remove((out + "/" + what).c_str());
+        save();
+      } catch (const std::exception& e) {  // e.g. nothing observed often enough: say so, keep the rest
+        std::cerr << "offline_mapper: " << what << " not written: " << e.what() << "\n";
+      }
+    }
     const auto& s = sync.stats();
     std::ofstream md(out + "/timings.md");
     char buf[512];

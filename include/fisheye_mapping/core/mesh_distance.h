@@ -38,3 +38,14 @@ Eigen::Vector3f closestPointOnTriangle(const Eigen::Vector3f& p, const Eigen::Ve
                                        const Eigen::Vector3f& c);
 
 }  // namespace fisheye_mapping
+
+namespace fisheye_mapping {
+
+/// Distance from each point of `from` to its nearest neighbour in `to` (PCL kd-tree);
+/// +infinity when `to` is empty.
+std::vector<float> nearestDistances(const std::vector<Eigen::Vector3f>& from, const std::vector<Eigen::Vector3f>& to);
+
+/// Share of distances <= t (0 for an empty list).
+double shareWithin(const std::vector<float>& distances, float t);
+
+}  // namespace fisheye_mapping
