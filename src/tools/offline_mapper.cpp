@@ -148,6 +148,12 @@ int main(int argc, char** argv) {
       det = std::make_unique<fm::Detector>(fm::loadDetectorConfig(yaml));
     }
 
+    if (det && depth_src == "gt")
+      throw std::runtime_error("--depth gt works with --detector ground_truth or none (no images are read)");
+    const auto toMat = [](const sensor_msgs::Image::ConstPtr& im) {
+      return cv_bridge::toCvShare(im, im->encoding == "mono8" ? "mono8" : "bgr8")->image;
+    };
+
     rosbag::Bag bag;
     try {
       bag.open(bag_path, rosbag::bagmode::Read);
@@ -214,17 +220,16 @@ int main(int argc, char** argv) {
           if (!quiet) std::fprintf(stderr, "\nframe set %.3f skipped: no pose (%s)\n", stamp.toSec(), e.what());
           continue;
         }
-        auto toMat = [](const sensor_msgs::Image::ConstPtr& im) {
-          return cv_bridge::toCvShare(im, im->encoding == "mono8" ? "mono8" : "bgr8")->image;
-        };
         const auto ts = Clock::now();
         fm::DepthResult r;
+        cv::Mat ref_img;  // the reference camera's image (sweep mode)
         if (depth_src == "gt") {
           if (set[0]->encoding != "32FC1") throw std::runtime_error(gt_depth_topic + " is not 32FC1");
           r.depth = cv_bridge::toCvCopy(set[0])->image;
         } else {
           std::vector<fm::SweepView> views;
-          const fm::SweepView ref_view = fm::rigSweepView(rig, ref, ref, toMat(set[ref]));
+          ref_img = toMat(set[ref]);
+          const fm::SweepView ref_view = fm::rigSweepView(rig, ref, ref, ref_img);
           for (int c = 0; c < int(set.size()); ++c)
             if (c != ref) views.push_back(fm::rigSweepView(rig, c, ref, toMat(set[c])));
           const Eigen::Isometry3d T_base_ref = rig.cameras[ref].T_base_cam;
@@ -235,10 +240,7 @@ int main(int argc, char** argv) {
         const auto td = Clock::now();
         std::vector<fm::Detection> boxes;
         int bw = r.depth.cols, bh = r.depth.rows;
-        if (det && depth_src == "gt") {
-          throw std::runtime_error("--depth gt works with --detector ground_truth or none (no images are read)");
-        } else if (det) {
-          const cv::Mat ref_img = toMat(set[ref]);
+        if (det) {
           boxes = det->detect(ref_img, true);
           bw = ref_img.cols, bh = ref_img.rows;
         } else if (detector == "ground_truth") {
