@@ -18,7 +18,7 @@ fm_setup() {
   local missing=() pkg
   while read -r pkg; do
     [[ -z "$pkg" || "$pkg" == \#* ]] && continue
-    dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")
+    [[ "$(dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null)" == "install ok installed" ]] || missing+=("$pkg")
   done < "$FM_ROOT/scripts/debian-packages.txt"
   if ((${#missing[@]} == 0)); then
     return 0
