@@ -2,12 +2,14 @@
 // geometry, filters, support-view selection, bad input, and whole sweeps of a
 // rendered synthetic street (exact ground truth) on both backends.
 #include <cmath>
+#include <tuple>
 #include <random>
 
 #include <gtest/gtest.h>
 #include <opencv2/imgproc.hpp>
 
 #include "fisheye_mapping/core/depth_image.h"
+#include "fisheye_mapping/core/opencl_context.h"
 #include "fisheye_mapping/core/plane_sweep.h"
 #include "fisheye_mapping/core/synthetic_world.h"
 
@@ -311,10 +313,15 @@ fm::synth::World* PlaneSweepScene::world_ = nullptr;
 std::vector<cv::Mat> PlaneSweepScene::images_;
 cv::Mat PlaneSweepScene::truth_;
 
-TEST_F(PlaneSweepScene, OpenClAgreesWithTheReferenceImplementation) {
+// Both product backends against the double-precision reference: "opencl"
+// (the GPU path, here on PoCL) and "native" (the CPU path).
+class PlaneSweepBackends : public PlaneSweepScene, public ::testing::WithParamInterface<std::string> {};
+
+TEST_P(PlaneSweepBackends, AgreeWithTheReferenceImplementation) {
+  const std::string backend = GetParam();
   for (const std::string res : {"full", "multiscale"}) {
     const fm::DepthResult cpu = run(config("cpu", res));
-    const fm::DepthResult cl = run(config("opencl", res));
+    const fm::DepthResult cl = run(config(backend, res));
     ASSERT_EQ(cpu.used_views.size(), 2u);
     // The kernels' running float sums lose precision on nearly flat windows
     // (variance ~1e-4 next to mean^2 ~0.5); compare where there is texture.
@@ -337,12 +344,33 @@ TEST_F(PlaneSweepScene, OpenClAgreesWithTheReferenceImplementation) {
         }
       }
     }
-    // Running float sums (OpenCL) vs direct double sums (reference): costs
-    // within 0.01, which moves the parabolic refinement a little (ranges
-    // within 1 %) and can flip a near-tie between planes on a few pixels.
-    EXPECT_GT(both, 0.3 * cpu.raw_depth.total()) << res;
-    EXPECT_GE(close, 0.99 * both) << res;
-    EXPECT_LE(one, 0.002 * cpu.raw_depth.total()) << res;
+    // Float sums (OpenCL: running; native: direct) vs direct double sums
+    // (reference): costs within 0.01, which moves the parabolic refinement a
+    // little (ranges within 1 %) and can flip a near-tie between planes on a
+    // few pixels.
+    EXPECT_GT(both, 0.3 * cpu.raw_depth.total()) << backend << " " << res;
+    EXPECT_GE(close, 0.99 * both) << backend << " " << res;
+    EXPECT_LE(one, 0.002 * cpu.raw_depth.total()) << backend << " " << res;
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Products, PlaneSweepBackends, ::testing::Values("opencl", "native"));
+
+TEST(PlaneSweepBackend, AutoTakesTheGpuElseTheNativeCpuBackend) {
+  fm::PlaneSweepConfig c;
+  ASSERT_EQ(c.backend, "auto");
+  fm::PlaneSweep sweep(c);
+  if (fm::OpenClContext::hasGpu()) {
+    EXPECT_EQ(sweep.backendName().rfind("opencl", 0), 0u) << sweep.backendName();
+  } else {
+    EXPECT_EQ(sweep.backendName().rfind("native", 0), 0u) << sweep.backendName();
+  }
+  c.backend = "gpu";
+  try {
+    fm::PlaneSweep bad(c);
+    FAIL() << "no error for an unknown backend";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_EQ(std::string(e.what()).rfind("backend:", 0), 0u) << e.what();
   }
 }
 
@@ -389,12 +417,30 @@ TEST(PlaneSweepAccuracy, DepthMatchesTheRenderedTruthAndFiltersHelp) {
   }
 }
 
-TEST_F(PlaneSweepScene, SelfMaskedPixelsHaveNoDepth) {
+TEST_P(PlaneSweepBackends, SelfMaskedPixelsHaveNoDepth) {
   cv::Mat mask(images_[0].size(), CV_8UC1, cv::Scalar(0));
   mask.rowRange(100, 136).setTo(255);  // the "hood"
-  fm::PlaneSweepConfig c = config("opencl", "multiscale");
+  fm::PlaneSweepConfig c = config(GetParam(), "multiscale");
   const fm::DepthResult r = run(c, mask);
   EXPECT_EQ(cv::countNonZero(r.raw_depth.rowRange(100, 136) == r.raw_depth.rowRange(100, 136)), 0);
   // Rows just above the hood still get depth (the ground there is textured).
   EXPECT_GT(cv::countNonZero(r.raw_depth.rowRange(80, 96) == r.raw_depth.rowRange(80, 96)), 0.5 * 16 * 256);
+}
+
+TEST_P(PlaneSweepBackends, BlackSaturatedAndFullyMaskedViewsGiveNoDepthAndNoCrash) {
+  fm::PlaneSweep sweep(config(GetParam(), "multiscale"));
+  const Eigen::Isometry3d T_base_ref = rig_->cameras[0].T_base_cam;
+  const fm::SweepView ref = fm::rigSweepView(*rig_, 0, 0, images_[0]);
+  const cv::Mat black(images_[1].size(), CV_8UC1, cv::Scalar(0)), white(images_[1].size(), CV_8UC1, cv::Scalar(255));
+  const cv::Mat full_mask(images_[1].size(), CV_8UC1, cv::Scalar(255));
+  for (const auto& [what, image, mask] : {std::make_tuple("black", black, cv::Mat()),
+                                          std::make_tuple("saturated", white, cv::Mat()),
+                                          std::make_tuple("fully self-masked", images_[1], full_mask)}) {
+    std::vector<fm::SweepView> supports = {fm::rigSweepView(*rig_, 1, 0, image, mask),
+                                           fm::rigSweepView(*rig_, 2, 0, image, mask)};
+    const fm::DepthResult r = sweep.compute(ref, supports, &T_base_ref);
+    // Untextured or unusable views: no window correlates, so no pixel has a cost.
+    EXPECT_EQ(cv::countNonZero(r.raw_depth == r.raw_depth), 0) << what;
+    EXPECT_EQ(cv::countNonZero(r.cost == r.cost), 0) << what;
+  }
 }

@@ -63,6 +63,16 @@ std::string clSource(const std::string& name) {
   return it->second;
 }
 
+bool OpenClContext::hasGpu() {
+  for (const auto& d : allDevices()) {
+    try {
+      if (d.device.getInfo<CL_DEVICE_TYPE>() & CL_DEVICE_TYPE_GPU) return true;
+    } catch (const cl::Error&) {
+    }
+  }
+  return false;
+}
+
 std::vector<std::string> OpenClContext::listDevices() {
   std::vector<std::string> names;
   for (const auto& d : allDevices()) names.push_back(d.name);

@@ -1,5 +1,7 @@
 #include "fisheye_mapping/core/plane_sweep.h"
 
+#include "fisheye_mapping/core/opencl_context.h"
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -110,7 +112,8 @@ void PlaneSweepConfig::validate() const {
   require(crop_height > 0 && crop_height <= 1, "crop_height", "must be in (0, 1]");
   require(min_parallax_px >= 0, "min_parallax_px", "must be >= 0");
   require(min_overlap >= 0 && min_overlap <= 1, "min_overlap", "must be in [0, 1]");
-  require(backend == "opencl" || backend == "cpu", "backend", "must be 'opencl' or 'cpu', got '" + backend + "'");
+  require(backend == "auto" || backend == "native" || backend == "opencl" || backend == "cpu", "backend",
+          "must be 'auto', 'native', 'opencl' or 'cpu', got '" + backend + "'");
   require(band_rows >= 1, "band_rows", "must be at least 1");
   filters.validate();
 }
@@ -281,7 +284,15 @@ SweepView rigSweepView(const Rig& rig, int index, int ref_index, const cv::Mat& 
 
 PlaneSweep::PlaneSweep(const PlaneSweepConfig& config) : config_(config) {
   config_.validate();
-  backend_ = config_.backend == "cpu" ? makeCpuSweepBackend() : makeOpenClSweepBackend(config_.device);
+  std::string backend = config_.backend;
+  if (backend == "auto") backend = (!config_.device.empty() || OpenClContext::hasGpu()) ? "opencl" : "native";
+  if (backend == "cpu") {
+    backend_ = makeCpuSweepBackend();
+  } else if (backend == "native") {
+    backend_ = makeNativeSweepBackend();
+  } else {
+    backend_ = makeOpenClSweepBackend(config_.device);
+  }
 }
 
 PlaneSweep::~PlaneSweep() = default;

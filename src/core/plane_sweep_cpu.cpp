@@ -27,12 +27,10 @@ class CpuSweepBackend : public SweepBackend {
 #pragma omp parallel for schedule(static)
       for (int pix = 0; pix < npix; ++pix) {
         const float rx = rays[3 * pix], ry = rays[3 * pix + 1], rz = rays[3 * pix + 2];
-        const float t = fm_plane_range(planes[p], rx, ry, rz);
+        const float inv_t = fm_plane_inverse_range(planes[p], rx, ry, rz);
         for (int v = 0; v < views; ++v) {
           warped[static_cast<size_t>(v) * npix + pix] =
-              t > 0.0f ? fm_warp_sample(&level.cameras[v], &level.poses[v], level.images[v].ptr<float>(), t * rx,
-                                        t * ry, t * rz)
-                       : -1.0f;
+              fm_warp_sample_ray(&level.cameras[v], &level.poses[v], level.images[v].ptr<float>(), rx, ry, rz, inv_t);
         }
       }
 #pragma omp parallel for schedule(static)

@@ -27,6 +27,7 @@
 #include <visualization_msgs/MarkerArray.h>
 
 #include "fisheye_mapping/FilePath.h"
+#include "fisheye_mapping/FrameDone.h"
 #include "fisheye_mapping/core/tsdf_map.h"
 #include "fisheye_mapping/core/tsdf_mesher.h"
 #include "fisheye_mapping/ros/ros_params.h"
@@ -79,6 +80,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     tf_filter_->registerFailureCallback([this](const sensor_msgs::ImageConstPtr& msg,
                                                tf2_ros::filter_failure_reasons::FilterFailureReason reason) {
       ++dropped_no_tf_;
+      done(msg->header, "no transform from '" + msg->header.frame_id + "' to '" + world_frame_ + "'");
       NODELET_WARN_THROTTLE(5.0, "depth frame at %.3f (frame '%s') dropped: no transform to '%s' (%s); %zu so far",
                             msg->header.stamp.toSec(), msg->header.frame_id.c_str(), world_frame_.c_str(),
                             reason == tf2_ros::filter_failure_reasons::OutTheBack ? "too old for the tf buffer"
@@ -90,6 +92,9 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     mesh_pub_ = nh.advertise<visualization_msgs::MarkerArray>(
         "mesh", 16, [this](const ros::SingleSubscriberPublisher& pub) { pub.publish(fullMesh()); });
     cloud_pub_ = nh.advertise<sensor_msgs::PointCloud2>("cloud", 2, true);
+    // One FrameDone per depth frame finished with (fused or skipped): the
+    // paced bag player waits for it.
+    done_pub_ = nh.advertise<fisheye_mapping::FrameDone>("fusion_done", 100);
     services_.push_back(pnh.advertiseService("save_mesh", &TsdfFusionNodelet::saveMesh, this));
     services_.push_back(pnh.advertiseService("save_cloud", &TsdfFusionNodelet::saveCloud, this));
     services_.push_back(pnh.advertiseService("save_map", &TsdfFusionNodelet::saveMap, this));
@@ -101,18 +106,37 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
                  cfg.integrator.c_str());
   }
 
+  // Tells the paced player that this depth frame is finished with.
+  void done(const std_msgs::Header& header, const std::string& skipped_because) {
+    fisheye_mapping::FrameDone msg;
+    msg.header = header;
+    msg.fused = skipped_because.empty();
+    msg.reason = skipped_because;
+    done_pub_.publish(msg);
+  }
+
   void onDepth(const sensor_msgs::ImageConstPtr& msg) {
+    std::string skipped = "not fused";
+    struct Ack {  // every path out of here acknowledges the frame
+      TsdfFusionNodelet* self;
+      const std_msgs::Header& header;
+      std::string& why;
+      ~Ack() { self->done(header, why); }
+    } ack{this, msg->header, skipped};
     const int cam_index = cameraIndex(msg->header.frame_id);
     if (cam_index < 0) {
+      skipped = "frame '" + msg->header.frame_id + "' is not a camera of the rig";
       NODELET_WARN_THROTTLE(5.0, "depth frame '%s' is not a camera of the rig; frame skipped", msg->header.frame_id.c_str());
       return;
     }
     if (msg->encoding != sensor_msgs::image_encodings::TYPE_32FC1) {
+      skipped = "encoding '" + msg->encoding + "' is not 32FC1";
       NODELET_WARN_THROTTLE(5.0, "depth must be 32FC1 (metres of range along the ray), got '%s'; frame skipped",
                             msg->encoding.c_str());
       return;
     }
     if (!last_stamp_.isZero() && msg->header.stamp < last_stamp_) {
+      skipped = "stamp older than the last fused frame (time went backwards)";
       NODELET_WARN("depth stamp %.3f is older than the last fused one (%.3f): time went backwards; frame skipped "
                    "(call ~clear_map after restarting a bag)",
                    msg->header.stamp.toSec(), last_stamp_.toSec());
@@ -123,6 +147,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
       T_W_C = tf2::transformToEigen(tf_buffer_->lookupTransform(world_frame_, msg->header.frame_id, msg->header.stamp));
       T_W_B = tf2::transformToEigen(tf_buffer_->lookupTransform(world_frame_, base_frame_, msg->header.stamp));
     } catch (const tf2::TransformException& e) {
+      skipped = std::string("no pose: ") + e.what();
       NODELET_WARN_THROTTLE(5.0, "no pose for the depth frame at %.3f: %s; frame skipped", msg->header.stamp.toSec(), e.what());
       return;
     }
@@ -130,6 +155,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     try {
       depth = cv_bridge::toCvShare(msg);
     } catch (const cv_bridge::Exception& e) {
+      skipped = std::string("unreadable depth image: ") + e.what();
       NODELET_WARN_THROTTLE(5.0, "cannot read the depth image: %s; frame skipped", e.what());
       return;
     }
@@ -138,9 +164,11 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
       const auto stats = map_->integrate(depth->image, rig_.cameras[cam_index].model, T_W_C, T_W_B.translation());
       last_stamp_ = msg->header.stamp;
       ++frames_fused_;
+      skipped.clear();
       NODELET_DEBUG("fused frame %.3f: %zu valid pixels, %zu blocks", msg->header.stamp.toSec(), stats.valid_pixels,
                     stats.blocks_touched);
     } catch (const std::invalid_argument& e) {
+      skipped = e.what();
       NODELET_WARN_THROTTLE(5.0, "depth frame at %.3f skipped: %s", msg->header.stamp.toSec(), e.what());
     }
   }
@@ -286,7 +314,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
   std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
   message_filters::Subscriber<sensor_msgs::Image> depth_sub_;
   std::unique_ptr<tf2_ros::MessageFilter<sensor_msgs::Image>> tf_filter_;
-  ros::Publisher mesh_pub_, cloud_pub_;
+  ros::Publisher mesh_pub_, cloud_pub_, done_pub_;
   std::vector<ros::ServiceServer> services_;
   ros::WallTimer timer_;
   std::string world_frame_, base_frame_, save_on_shutdown_, output_dir_;

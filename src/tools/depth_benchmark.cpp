@@ -1,18 +1,25 @@
 // depth_benchmark: milliseconds per frame of the plane-sweep depth stage for
 // full / half / multi-scale, without and with filters, on one rendered frame
-// set of the rig (5 cameras at 1024x544 for the default rig), and the share of
-// the OpenCL device's FP32 FMA peak that the sweep reaches, with the peak
-// measured in the same run by an FMA-only kernel.
+// set of the rig (5 cameras at 1024x544 for the default rig), for each
+// backend asked for, and the share of the machine's FP32 FMA peak that the
+// sweep reaches, with the peak measured in the same run: an FMA-only OpenCL
+// kernel on the OpenCL device, and native AVX2 FMA chains on every OpenMP
+// thread of the CPU; the larger of the two CPU figures is the CPU's peak.
+// Also prints the process's peak resident memory.
 //
 //   depth_benchmark --camchain F --mount F [--repeats N] [--device D]
+//                   [--backends native,opencl] [--band-rows N]
 //
 // Achieved FLOP/s are estimated from operation counts: about kFlopsPerSample
 // floating-point operations per pixel, plane and supporting view (plane
 // intersection, transform, unified projection with radial-tangential
 // distortion, bilinear sample, running window sums, ZNCC), counting a
 // division or square root as one.
+#include <sys/resource.h>
+
 #include <algorithm>
 #include <chrono>
+#include <sstream>
 #include <iomanip>
 #include <iostream>
 #include <map>
@@ -61,13 +68,57 @@ __kernel void fma_peak(__global float* out, int iters) {
   return best;
 }
 
+// FP32 FMA peak of the CPU: independent 8-wide FMA chains on every OpenMP
+// thread (AVX2 + FMA when the CPU has them; 0 otherwise).
+#if defined(__x86_64__) && defined(__GNUC__)
+__attribute__((target("avx2,fma"))) double fmaChainsGflops(long iters) {
+  typedef float v8 __attribute__((vector_size(32)));
+  double flops = 0;
+  const auto t0 = std::chrono::steady_clock::now();
+#pragma omp parallel reduction(+ : flops)
+  {
+    v8 a = {1, 2, 3, 4, 5, 6, 7, 8}, b = a + 1, c = a + 2, d = a + 3, e = a + 4, f = a + 5, g = a + 6, h = a + 7,
+       i = a + 8, j = a + 9;
+    const v8 m = {0.9999f, 0.9999f, 0.9999f, 0.9999f, 0.9999f, 0.9999f, 0.9999f, 0.9999f};
+    const v8 k = {1e-4f, 1e-4f, 1e-4f, 1e-4f, 1e-4f, 1e-4f, 1e-4f, 1e-4f};
+    for (long n = 0; n < iters; ++n) {
+      a = a * m + k; b = b * m + k; c = c * m + k; d = d * m + k; e = e * m + k;
+      f = f * m + k; g = g * m + k; h = h * m + k; i = i * m + k; j = j * m + k;
+      // Keeps every chain alive and in registers: nothing can be folded.
+      asm volatile("" : "+x"(a), "+x"(b), "+x"(c), "+x"(d), "+x"(e), "+x"(f), "+x"(g), "+x"(h), "+x"(i), "+x"(j));
+    }
+    const v8 s = a + b + c + d + e + f + g + h + i + j;
+    volatile float sink = 0;
+    for (int l = 0; l < 8; ++l) sink = sink + s[l];
+    flops += 2.0 * 8 * 10 * iters;
+  }
+  const double sec = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return flops / sec / 1e9;
+}
+double measureCpuPeakGflops() {
+  __builtin_cpu_init();
+  if (!__builtin_cpu_supports("avx2") || !__builtin_cpu_supports("fma")) return 0.0;
+  double best = 0;
+  for (int r = 0; r < 4; ++r) best = std::max(best, fmaChainsGflops(20000000));
+  return best;
+}
+#else
+double measureCpuPeakGflops() { return 0.0; }
+#endif
+
+double peakRssMb() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return u.ru_maxrss / 1024.0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   std::map<std::string, std::string> a;
   for (int i = 1; i + 1 < argc; i += 2) a[std::string(argv[i]).substr(2)] = argv[i + 1];
   if (!a.count("camchain") || !a.count("mount")) {
-    std::cerr << "usage: depth_benchmark --camchain F --mount F [--repeats N] [--device D]\n";
+    std::cerr << "usage: depth_benchmark --camchain F --mount F [--repeats N] [--device D] [--backends native,opencl]\n";
     return 2;
   }
   try {
@@ -87,44 +138,73 @@ int main(int argc, char** argv) {
     const fm::SweepView ref = fm::rigSweepView(rig, 0, 0, images[0]);
     const Eigen::Isometry3d T_base_ref = rig.cameras[0].T_base_cam;
 
-    fm::OpenClContext ctx(a.count("device") ? a["device"] : "");
-    const double peak = measurePeakGflops(ctx);
-    std::cout << "device: " << ctx.deviceName() << "\n"
-              << "FP32 FMA peak measured: " << std::fixed << std::setprecision(1) << peak << " GFLOP/s\n"
-              << "rig: " << rig.cameras.size() << " cameras, " << rig.cameras[0].model.width() << "x"
+    std::vector<std::string> backends;
+    {
+      std::stringstream ss(a.count("backends") ? a["backends"] : "native,opencl");
+      for (std::string b; std::getline(ss, b, ',');) backends.push_back(b);
+    }
+    const double cpu_peak = measureCpuPeakGflops();
+    std::cout << "CPU FP32 FMA peak measured (AVX2 FMA chains, every OpenMP thread): " << std::fixed
+              << std::setprecision(1) << cpu_peak << " GFLOP/s\n";
+    double cl_peak = 0.0;
+    std::string cl_name;
+    try {
+      fm::OpenClContext ctx(a.count("device") ? a["device"] : "");
+      cl_peak = measurePeakGflops(ctx);
+      cl_name = ctx.deviceName();
+      std::cout << "OpenCL device: " << cl_name << ", FP32 FMA peak measured: " << cl_peak << " GFLOP/s\n";
+    } catch (const std::exception& e) {
+      std::cout << "OpenCL: no device (" << e.what() << ")\n";
+    }
+    const bool cl_is_gpu = fm::OpenClContext::hasGpu() && !cl_name.empty();
+    std::cout << "rig: " << rig.cameras.size() << " cameras, " << rig.cameras[0].model.width() << "x"
               << rig.cameras[0].model.height() << ", reference " << rig.cameras[0].name << "; " << repeats
               << " timed runs after one warm-up, median\n\n"
-              << "| scales | filters | ms per frame | supporting views | share of FMA peak |\n"
-              << "|---|---|---:|---:|---:|\n";
+              << "| backend | scales | filters | ms per frame | supporting views | share of FMA peak |\n"
+              << "|---|---|---|---:|---:|---:|\n";
     std::map<std::string, double> ms_of;
-    for (const std::string res : {"full", "half", "multiscale"}) {
-      for (const bool filters : {false, true}) {
-        fm::PlaneSweepConfig c;
-        c.resolution = res;
-        c.device = a.count("device") ? a["device"] : "";
-        if (!filters) c.filters.cost = c.filters.uniqueness = c.filters.consistency = false;
-        fm::PlaneSweep sweep(c);
-        fm::DepthResult r = sweep.compute(ref, supports, &T_base_ref);  // warm-up: kernel builds, buffers
-        std::vector<double> ms;
-        for (int k = 0; k < repeats; ++k) ms.push_back(sweep.compute(ref, supports, &T_base_ref).total_ms);
-        std::sort(ms.begin(), ms.end());
-        const double med = ms[ms.size() / 2];
-        const double W = rig.cameras[0].model.width(), H = rig.cameras[0].model.height();
-        const double planes = fm::makeSweepPlanes(c, &T_base_ref).size();
-        double pixels = W * H;
-        if (res == "half") pixels = (W / 2) * (H / 2);
-        if (res == "multiscale") pixels = (W / 2) * (H / 2) + std::round(c.crop_width * W) * std::round(c.crop_height * H);
-        const double gflop = kFlopsPerSample * pixels * planes * r.used_views.size() / 1e9;
-        ms_of[res + (filters ? "+f" : "")] = med;
-        std::cout << "| " << res << " | " << (filters ? "on" : "off") << " | " << std::setprecision(0) << med << " | "
-                  << r.used_views.size() << " | " << std::setprecision(1) << 100.0 * gflop / (med / 1e3) / peak
-                  << " % |\n";
+    std::string product;
+    for (const std::string& backend : backends) {
+      // The CPU's peak is the larger of the two measurements of it; a GPU's
+      // is its own.
+      const double peak = (backend == "opencl" && cl_is_gpu) ? cl_peak : std::max(cpu_peak, cl_peak);
+      for (const std::string res : {"full", "half", "multiscale"}) {
+        for (const bool filters : {false, true}) {
+          fm::PlaneSweepConfig c;
+          c.backend = backend;
+          c.resolution = res;
+          c.device = a.count("device") ? a["device"] : "";
+          if (a.count("band-rows")) c.band_rows = std::stoi(a["band-rows"]);
+          if (!filters) c.filters.cost = c.filters.uniqueness = c.filters.consistency = false;
+          fm::PlaneSweep sweep(c);
+          fm::DepthResult r = sweep.compute(ref, supports, &T_base_ref);  // warm-up: kernel builds, buffers
+          std::vector<double> ms;
+          for (int k = 0; k < repeats; ++k) ms.push_back(sweep.compute(ref, supports, &T_base_ref).total_ms);
+          std::sort(ms.begin(), ms.end());
+          const double med = ms[ms.size() / 2];
+          const double W = rig.cameras[0].model.width(), H = rig.cameras[0].model.height();
+          const double planes = fm::makeSweepPlanes(c, &T_base_ref).size();
+          double pixels = W * H;
+          if (res == "half") pixels = (W / 2) * (H / 2);
+          if (res == "multiscale")
+            pixels = (W / 2) * (H / 2) + std::round(c.crop_width * W) * std::round(c.crop_height * H);
+          const double gflop = kFlopsPerSample * pixels * planes * r.used_views.size() / 1e9;
+          ms_of[backend + ":" + res + (filters ? "+f" : "")] = med;
+          std::cout << "| " << sweep.backendName() << " | " << res << " | " << (filters ? "on" : "off") << " | "
+                    << std::setprecision(0) << med << " | " << r.used_views.size() << " | " << std::setprecision(1)
+                    << (peak > 0 ? 100.0 * gflop / (med / 1e3) / peak : 0.0) << " % |\n";
+        }
       }
+      if (product.empty()) product = backend;
     }
-    std::cout << "\nmulti-scale / full time (no filters): " << std::setprecision(2)
-              << ms_of["multiscale"] / ms_of["full"] << " (paper: 36 / 50 = 0.72)\n"
-              << "multi-scale filtered: " << std::setprecision(0) << ms_of["multiscale+f"]
-              << " ms per frame (target <= 400, goal 250)\n";
+    std::cout << "\npeak resident memory: " << std::setprecision(0) << peakRssMb() << " MB\n";
+    for (const std::string& backend : backends) {
+      std::cout << backend << ": multi-scale / full time (no filters): " << std::setprecision(2)
+                << ms_of[backend + ":multiscale"] / ms_of[backend + ":full"] << " (paper: 36 / 50 = 0.72)\n";
+    }
+    // The last line: the first backend listed (the product's on this machine).
+    std::cout << "multi-scale filtered: " << std::setprecision(0) << ms_of[product + ":multiscale+f"]
+              << " ms per frame (" << product << "; target <= 400, goal 250)\n";
     return 0;
   } catch (const std::exception& e) {
     std::cerr << "depth_benchmark: " << e.what() << "\n";

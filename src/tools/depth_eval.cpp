@@ -1,7 +1,7 @@
 // depth_eval: evaluates the plane-sweep depth stage.
 //
 //   depth_eval synthetic --camchain F --mount F --out DIR [--preset urban|forest]
-//              [--seed N] [--frames N] [--start S] [--step S] [--backend opencl|cpu]
+//              [--seed N] [--frames N] [--start S] [--step S] [--backend auto|native|opencl|cpu]
 //              [--device D] [--max-range M]
 //     Renders the rig on a synthetic drive (the same world as make_drive) and
 //     compares depth with the exact rendered range of the reference camera
@@ -41,7 +41,7 @@ namespace {
 [[noreturn]] void usage(const std::string& msg) {
   std::cerr << "depth_eval: " << msg << "\n"
             << "usage: depth_eval synthetic --camchain F --mount F --out DIR [--preset urban|forest] [--seed N]\n"
-            << "                  [--frames N] [--start S] [--step S] [--backend opencl|cpu] [--device D]\n"
+            << "                  [--frames N] [--start S] [--step S] [--backend auto|native|opencl|cpu] [--device D]\n"
             << "                  [--max-range M]\n"
             << "       depth_eval vcharge --data DIR --camera left|right --out DIR [--device D]\n";
   std::exit(2);
@@ -87,7 +87,7 @@ int runSynthetic(const std::map<std::string, std::string>& a) {
   for (const auto& c : rig.cameras) rays.push_back(fm::pixelRays(c.model));
 
   fm::PlaneSweepConfig base;
-  base.backend = get(a, "backend", "opencl");
+  base.backend = get(a, "backend", "auto");
   base.device = get(a, "device", "-");
   if (base.device == "-") base.device.clear();
   fm::DepthFilterConfig none;

@@ -180,7 +180,9 @@ FM_T_DECL FM_FN void fm_from_pixel(const FM_CAM_SPACE FM_CAM* cam, fm_real u, fm
   *mx = (u - cam->cx - cam->skew * (*my)) / cam->fx;
 }
 
-/* Projects the point (x, y, z) given in the camera frame. */
+/* Projects the point (x, y, z) given in the camera frame. Validity is
+ * combined with & and the special cases are selects rather than branches, so
+ * that a loop over points vectorizes (C++ and OpenCL alike). */
 FM_T_DECL FM_FN int fm_project(const FM_CAM_SPACE FM_CAM* cam, fm_real x, fm_real y, fm_real z, fm_real* u,
                                fm_real* v) {
   fm_real mx = 0.0f;
@@ -197,37 +199,31 @@ FM_T_DECL FM_FN int fm_project(const FM_CAM_SPACE FM_CAM* cam, fm_real x, fm_rea
       valid = z > -w * d;
       denom = z + cam->xi * d;
     }
-    if (!valid) {
-      denom = 1.0f; /* keep the arithmetic finite; the result is flagged */
-    }
-    fm_real nx = x / denom;
-    fm_real ny = y / denom;
-    valid = valid && (nx * nx + ny * ny) <= cam->max_r2;
+    denom = valid ? denom : 1.0f; /* keep the arithmetic finite; the result is flagged */
+    fm_real inv = 1.0f / denom;
+    fm_real nx = x * inv;
+    fm_real ny = y * inv;
+    valid = valid & ((nx * nx + ny * ny) <= cam->max_r2 ? 1 : 0);
     fm_radtan_distort(cam, nx, ny, &mx, &my);
   } else if (FM_IS_MODEL(cam, FM_MODEL_DOUBLE_SPHERE)) {
     fm_real d1 = FM_SQRT(x * x + y * y + z * z);
     fm_real alpha = cam->alpha;
     fm_real w1 = alpha <= 0.5f ? alpha / (1.0f - alpha) : (1.0f - alpha) / alpha;
     fm_real w2 = (w1 + cam->xi) / FM_SQRT(2.0f * w1 * cam->xi + cam->xi * cam->xi + 1.0f);
-    valid = z > -w2 * d1;
     fm_real k = cam->xi * d1 + z;
     fm_real d2 = FM_SQRT(x * x + y * y + k * k);
     fm_real norm = alpha * d2 + (1.0f - alpha) * k;
-    if (!valid || !(norm > 0.0f)) {
-      valid = 0;
-      norm = 1.0f;
-    }
+    valid = (z > -w2 * d1 ? 1 : 0) & (norm > 0.0f ? 1 : 0);
+    norm = valid ? norm : 1.0f;
     mx = x / norm;
     my = y / norm;
   } else if (FM_IS_MODEL(cam, FM_MODEL_KANNALA_BRANDT)) {
     fm_real r = FM_SQRT(x * x + y * y);
     fm_real theta = FM_ATAN2(r, z);
-    valid = theta <= cam->max_theta && (r > 0.0f || z > 0.0f);
-    if (r > 0.0f) {
-      fm_real scale = fm_kb_theta_d(cam, theta) / r;
-      mx = x * scale;
-      my = y * scale;
-    }
+    valid = (theta <= cam->max_theta ? 1 : 0) & ((r > 0.0f || z > 0.0f) ? 1 : 0);
+    fm_real scale = fm_kb_theta_d(cam, theta) / (r > 0.0f ? r : 1.0f);
+    mx = r > 0.0f ? x * scale : 0.0f;
+    my = r > 0.0f ? y * scale : 0.0f;
   } else {
     valid = 0;
   }

@@ -43,6 +43,8 @@ class OpenClContext {
 
   // "<platform> / <device>" for every OpenCL device on the machine.
   static std::vector<std::string> listDevices();
+  // Whether any OpenCL device on the machine is a GPU (never throws).
+  static bool hasGpu();
 
   // Builds (or returns the cached) program made of the given sources,
   // concatenated in order. Throws OpenClError carrying the build log.

@@ -21,9 +21,13 @@
 // Output depth: CV_32FC1, metres of Euclidean range along the pixel's ray,
 // NaN where invalid.
 //
-// Two backends share the warping, scoring and selection code
-// (plane_sweep_shared.h): "opencl" (the product; any OpenCL 1.2 device) and
-// "cpu" (a plain C++ reference, slow, for tests on small images).
+// Three backends share the warping, scoring and selection code
+// (plane_sweep_shared.h): "opencl" (any OpenCL 1.2 device: the GPU path),
+// "native" (C++ with OpenMP threads and SIMD loops, baseline x86-64 or
+// AVX2 + FMA chosen at run time: the CPU path) and "cpu" (a plain C++
+// reference in double precision, slow, for tests on small images). "auto"
+// (the default) takes "opencl" when the machine has an OpenCL GPU, else
+// "native".
 #ifndef FISHEYE_MAPPING_CORE_PLANE_SWEEP_H_
 #define FISHEYE_MAPPING_CORE_PLANE_SWEEP_H_
 
@@ -82,9 +86,11 @@ struct PlaneSweepConfig {
   double min_overlap = 0.2;
   DepthFilterConfig filters;
   // Backend.
-  std::string backend = "opencl";  // "opencl" | "cpu"
-  std::string device;              // OpenCL device (see OpenClContext)
-  int band_rows = 32;              // rows per work item of the cost kernel
+  std::string backend = "auto";    // "auto" | "native" | "opencl" | "cpu"
+  std::string device;              // OpenCL device (see OpenClContext); "auto" with a
+                                   // device set takes "opencl"
+  int band_rows = 32;              // rows per work item of the cost kernel (opencl)
+                                   // or per band of a thread (native)
   // Throws std::invalid_argument naming the field.
   void validate() const;
 };
@@ -150,6 +156,7 @@ class SweepBackend {
                      const PlaneSweepConfig& config, cv::Mat* range, cv::Mat* cost, cv::Mat* ratio) = 0;
 };
 std::unique_ptr<SweepBackend> makeCpuSweepBackend();
+std::unique_ptr<SweepBackend> makeNativeSweepBackend();
 std::unique_ptr<SweepBackend> makeOpenClSweepBackend(const std::string& device);
 
 // Not thread-safe (one per thread); keeps the per-scale ray tables and the

@@ -22,13 +22,11 @@
 namespace fisheye_mapping {
 #endif
 
-#ifdef FM_OPENCL
-#define FM_FMIN(a, b) fmin(a, b)
-#define FM_FMAX(a, b) fmax(a, b)
-#else
-#define FM_FMIN(a, b) std::fmin(a, b)
-#define FM_FMAX(a, b) std::fmax(a, b)
-#endif
+/* max / clamp as selects. A NaN x gives lo, exactly as fmax(x, lo) and
+ * fmin(fmax(x, lo), hi) do, but unlike std::fmin/fmax (libm calls unless
+ * -ffinite-math-only) they vectorize in C++ as well as in OpenCL C. */
+FM_FN float fm_maxf(float x, float lo) { return x > lo ? x : lo; }
+FM_FN float fm_clampf(float x, float lo, float hi) { return x >= lo ? (x <= hi ? x : hi) : lo; }
 
 #define FM_SWEEP_MAX_VIEWS 8
 #define FM_COST_INVALID 2.0f
@@ -65,37 +63,80 @@ FM_FN float fm_plane_range(struct FmSweepPlane p, float rx, float ry, float rz) 
   return c > 1e-6f ? p.d / (c > 1e-6f ? c : 1.0f) : -1.0f;
 }
 
-/* Bilinear sample of a row-major float image whose unusable (self-masked)
- * pixels hold a negative value; -1 outside the area covered by pixel centres
- * or where any of the four pixels is unusable. Branch-free (the loads are
- * clamped into the image), so vectorizers can run it across work items. */
-FM_FN float fm_sample_bilinear(const FM_GLOBAL float* img, int width, int height, float u, float v) {
-  int inside = u >= 0.0f && v >= 0.0f && u <= (float)(width - 1) && v <= (float)(height - 1);
-  float uc = FM_FMIN(FM_FMAX(u, 0.0f), (float)(width - 1));
-  float vc = FM_FMIN(FM_FMAX(v, 0.0f), (float)(height - 1));
+/* Bilinear sampling of a row-major float image whose unusable (self-masked)
+ * pixels hold a negative value, in two halves so that a backend may do the
+ * four loads its own way between them (the native CPU backend loads them
+ * scalar: faster than gathers on CPUs):
+ *   fm_bilinear_setup: where the sample reads (index of the top-left pixel,
+ *     steps to its right and lower neighbours: 0 at the last column / row)
+ *     and its weights; returns whether (u, v) lies inside the area covered
+ *     by pixel centres (NaN: outside; outside reads pixel 0);
+ *   fm_bilinear_blend: the sample from the four pixels; -1 when outside or
+ *     when any of the four is unusable.
+ * No control flow: & of 0/1 ints rather than &&, selects rather than clamps,
+ * and the result blended arithmetically (a select on loaded values defeats
+ * GCC's if-conversion; ok * r + (ok - 1) is exactly r or -1 for the finite r
+ * here), so C++ compilers vectorize it as OpenCL does. */
+FM_FN int fm_bilinear_setup(int width, int height, float u, float v, int* i00, int* dx, int* dy, float* ax,
+                            float* ay) {
+  int inside = (u >= 0.0f ? 1 : 0) & (v >= 0.0f ? 1 : 0) & (u <= (float)(width - 1) ? 1 : 0) &
+               (v <= (float)(height - 1) ? 1 : 0);
+  float uc = inside ? u : 0.0f;
+  float vc = inside ? v : 0.0f;
   int x0 = (int)uc;
   int y0 = (int)vc;
-  int x1 = x0 + 1 < width ? x0 + 1 : x0;
-  int y1 = y0 + 1 < height ? y0 + 1 : y0;
-  float ax = uc - (float)x0;
-  float ay = vc - (float)y0;
-  float p00 = img[y0 * width + x0], p01 = img[y0 * width + x1];
-  float p10 = img[y1 * width + x0], p11 = img[y1 * width + x1];
-  float top = p00 + ax * (p01 - p00);
-  float bottom = p10 + ax * (p11 - p10);
-  int usable = inside && p00 >= 0.0f && p01 >= 0.0f && p10 >= 0.0f && p11 >= 0.0f;
-  return usable ? top + ay * (bottom - top) : -1.0f;
+  *i00 = y0 * width + x0;
+  *dx = x0 + 1 < width ? 1 : 0;
+  *dy = y0 + 1 < height ? width : 0;
+  *ax = uc - (float)x0;
+  *ay = vc - (float)y0;
+  return inside;
 }
 
-/* Intensity that view `cam` (pose T_view_ref) sees at the reference-frame
- * point (x, y, z); -1 when the point is outside its domain, image or mask. */
-FM_FN float fm_warp_sample(const FM_CAM_SPACE FM_CAM_FLOAT* cam, const FM_CAM_SPACE struct FmViewPose* pose,
-                           const FM_GLOBAL float* img, float x, float y, float z) {
-  float vx = pose->r[0] * x + pose->r[1] * y + pose->r[2] * z + pose->t[0];
-  float vy = pose->r[3] * x + pose->r[4] * y + pose->r[5] * z + pose->t[1];
-  float vz = pose->r[6] * x + pose->r[7] * y + pose->r[8] * z + pose->t[2];
+FM_FN float fm_bilinear_blend(int inside, float p00, float p01, float p10, float p11, float ax, float ay) {
+  float top = p00 + ax * (p01 - p00);
+  float bottom = p10 + ax * (p11 - p10);
+  float ok = (float)(inside & (p00 >= 0.0f ? 1 : 0) & (p01 >= 0.0f ? 1 : 0) & (p10 >= 0.0f ? 1 : 0) &
+                     (p11 >= 0.0f ? 1 : 0));
+  return ok * (top + ay * (bottom - top)) + (ok - 1.0f);
+}
+
+/* The two halves with the loads between: -1 outside the area covered by pixel
+ * centres or where any of the four pixels is unusable. */
+FM_FN float fm_sample_bilinear(const FM_GLOBAL float* img, int width, int height, float u, float v) {
+  int i00, dx, dy;
+  float ax, ay;
+  int inside = fm_bilinear_setup(width, height, u, v, &i00, &dx, &dy, &ax, &ay);
+  return fm_bilinear_blend(inside, img[i00], img[i00 + dx], img[i00 + dy], img[i00 + dy + dx], ax, ay);
+}
+
+/* Inverse range s = (n . r) / d along the unit ray r to the plane: positive
+ * when the ray meets the plane in front of the camera (n . r > 1e-6, as in
+ * fm_plane_range), else 0. */
+FM_FN float fm_plane_inverse_range(struct FmSweepPlane p, float rx, float ry, float rz) {
+  float c = p.nx * rx + p.ny * ry + p.nz * rz;
+  return c > 1e-6f ? c * (1.0f / p.d) : 0.0f;
+}
+
+/* Where view `cam` (pose T_view_ref: R, t) sees the point at inverse range s
+ * (> 0) along the reference ray r, i.e. r / s. Central projections do not
+ * change when the point is scaled by s > 0, so the point projected is
+ * R r + s t: no division. Returns whether it is in the view's model domain. */
+FM_FN int fm_warp_project_ray(const FM_CAM_SPACE FM_CAM_FLOAT* cam, const FM_CAM_SPACE struct FmViewPose* pose,
+                              float rx, float ry, float rz, float s, float* u, float* v) {
+  float vx = pose->r[0] * rx + pose->r[1] * ry + pose->r[2] * rz + s * pose->t[0];
+  float vy = pose->r[3] * rx + pose->r[4] * ry + pose->r[5] * rz + s * pose->t[1];
+  float vz = pose->r[6] * rx + pose->r[7] * ry + pose->r[8] * rz + s * pose->t[2];
+  return fm_project(cam, vx, vy, vz, u, v) & (s > 0.0f ? 1 : 0);
+}
+
+/* Intensity that view `cam` sees where the reference ray r meets the plane at
+ * inverse range s (fm_plane_inverse_range); -1 when the ray misses the plane
+ * (s = 0) or the point is outside the view's domain, image or mask. */
+FM_FN float fm_warp_sample_ray(const FM_CAM_SPACE FM_CAM_FLOAT* cam, const FM_CAM_SPACE struct FmViewPose* pose,
+                               const FM_GLOBAL float* img, float rx, float ry, float rz, float s) {
   float u, v;
-  int ok = fm_project(cam, vx, vy, vz, &u, &v);
+  int ok = fm_warp_project_ray(cam, pose, rx, ry, rz, s, &u, &v);
   return fm_sample_bilinear(img, cam->width, cam->height, ok ? u : -1.0f, ok ? v : -1.0f);
 }
 
@@ -104,18 +145,19 @@ FM_FN float fm_warp_sample(const FM_CAM_SPACE FM_CAM_FLOAT* cam, const FM_CAM_SP
  * the same window. */
 FM_FN float fm_zncc_cost(float n, float sw, float sww, float swr, float mean_r, float std_r) {
   float mean_w = sw / n;
-  float var_w = FM_FMAX(sww / n - mean_w * mean_w, 0.0f);
-  float denom = FM_FMAX(FM_SQRT(var_w) * std_r, 1e-12f);
-  float zncc = FM_FMIN(FM_FMAX((swr / n - mean_w * mean_r) / denom, -1.0f), 1.0f);
-  int textured = std_r >= FM_MIN_WINDOW_STD && var_w >= FM_MIN_WINDOW_STD * FM_MIN_WINDOW_STD;
+  float var_w = fm_maxf(sww / n - mean_w * mean_w, 0.0f);
+  float denom = fm_maxf(FM_SQRT(var_w) * std_r, 1e-12f);
+  float zncc = fm_clampf((swr / n - mean_w * mean_r) / denom, -1.0f, 1.0f);
+  int textured = (std_r >= FM_MIN_WINDOW_STD ? 1 : 0) & (var_w >= FM_MIN_WINDOW_STD * FM_MIN_WINDOW_STD ? 1 : 0);
   return textured ? 0.5f * (1.0f - zncc) : FM_COST_INVALID;
 }
 
 /* Aggregates the per-view costs (FM_COST_INVALID = view unusable here): the
  * mean of the valid ones, or (best-k, occlusion-robust: a view that cannot
  * see the point does not spoil the others) the mean of the min(k, valid)
- * smallest. Invalid when no view is valid. Branch-free: ranks by pairwise
- * comparison (ties broken by view index). */
+ * smallest. Invalid when no view is valid. Branch-free per pixel: ranks by
+ * pairwise comparison (ties broken by view index); the one branch is on the
+ * mode, the same for every pixel (and folded away where it is a constant). */
 FM_FN float fm_aggregate(const float* costs, int views, int mode, int k) {
   int n = 0;
   float sum_all = 0.0f;
@@ -125,48 +167,38 @@ FM_FN float fm_aggregate(const float* costs, int views, int mode, int k) {
     sum_all += valid ? costs[v] : 0.0f;
   }
   int take = (mode == FM_AGGREGATE_BEST_K && k < n) ? k : n;
-  float sum_best = 0.0f;
-  for (int v = 0; v < views; ++v) {
-    int rank = 0;
-    for (int w = 0; w < views; ++w) {
-      rank += (costs[w] < costs[v] || (costs[w] == costs[v] && w < v)) ? 1 : 0;
+  float sum = sum_all;
+  if (mode == FM_AGGREGATE_BEST_K) {
+    float sum_best = 0.0f;
+    for (int v = 0; v < views; ++v) {
+      int rank = 0;
+      for (int w = 0; w < views; ++w) {
+        rank += (costs[w] < costs[v] || (costs[w] == costs[v] && w < v)) ? 1 : 0;
+      }
+      sum_best += (costs[v] < FM_COST_INVALID && rank < take) ? costs[v] : 0.0f;
     }
-    sum_best += (costs[v] < FM_COST_INVALID && rank < take) ? costs[v] : 0.0f;
+    sum = take == n ? sum_all : sum_best;
   }
-  float sum = take == n ? sum_all : sum_best;
   return n > 0 ? sum / (float)(take > 0 ? take : 1) : FM_COST_INVALID;
 }
 
-/* Winner-takes-all over the cost volume of one pixel (cost of plane j at
- * volume[j * stride]), with the unit ray r of the pixel.
- * Returns 1 and writes
- *   *range      range along r of the best plane, refined (when `subpixel`)
- *               by the vertex of the parabola through the costs of the best
- *               plane and its two neighbours of the same family: inverse
- *               depth is interpolated for fronto-parallel planes, the
- *               plane's offset for ground planes;
- *   *best_cost  the lowest cost;
- *   *ratio      best / second-best cost in [0, 1] (0 = unique), where the
- *               second best is the lowest cost among the hypotheses whose
- *               range lies outside the interval spanned by the best plane's
- *               two neighbours (so a neighbour of the minimum, or a plane
- *               of the other family through the same point, does not count);
- * returns 0 when no plane has a valid cost. */
-FM_FN int fm_select_plane(const FM_GLOBAL float* volume, int stride, const FM_GLOBAL struct FmSweepPlane* planes,
-                          int n_planes, float rx, float ry, float rz, int subpixel, float* range,
-                          float* best_cost, float* ratio) {
-  int best = -1;
-  float cb = FM_COST_INVALID;
-  for (int j = 0; j < n_planes; ++j) {
-    float c = volume[j * stride];
-    if (c < cb) {
-      cb = c;
-      best = j;
-    }
-  }
-  if (best < 0) {
-    return 0;
-  }
+/* Winner-takes-all over the cost volume of one pixel, in three steps that
+ * fm_select_plane chains for one pixel (OpenCL, reference) and the native
+ * CPU backend runs plane by plane over many pixels at once:
+ *   1. best = the plane of lowest cost (first one on ties), cb its cost;
+ *   2. fm_select_refine: the best plane's neighbours of the same family
+ *      (prev, next; -1 where none), the interval [lo, hi] of ranges they span
+ *      along the ray, and the range of the best plane refined (when
+ *      `subpixel`) by the vertex of the parabola through the costs of the
+ *      best plane and its two neighbours: inverse depth is interpolated for
+ *      fronto-parallel planes, the plane's offset for ground planes;
+ *   3. second = the lowest cost among the planes fm_select_second_candidate
+ *      accepts: not the best or its neighbours, and whose range lies outside
+ *      [lo, hi] (so a plane of the other family through the same point does
+ *      not count); ratio = best / second in [0, 1] (0 = unique). */
+FM_FN float fm_select_refine(const FM_GLOBAL float* volume, int stride, const FM_GLOBAL struct FmSweepPlane* planes,
+                             int n_planes, int best, float cb, float rx, float ry, float rz, int subpixel, int* prev_out,
+                             int* next_out, float* lo_out, float* hi_out) {
   struct FmSweepPlane pb = planes[best];
   int prev = (best > 0 && planes[best - 1].family == pb.family) ? best - 1 : -1;
   int next = (best + 1 < n_planes && planes[best + 1].family == pb.family) ? best + 1 : -1;
@@ -204,24 +236,59 @@ FM_FN int fm_select_plane(const FM_GLOBAL float* volume, int stride, const FM_GL
     }
   }
   pb.d = d;
+  *prev_out = prev;
+  *next_out = next;
+  *lo_out = lo;
+  *hi_out = hi;
+  return fm_plane_range(pb, rx, ry, rz);
+}
+
+/* Whether plane j (range t along the ray) may be the second best. */
+FM_FN int fm_select_second_candidate(int j, int best, int prev, int next, float t, float lo, float hi) {
+  return (j != best ? 1 : 0) & (j != prev ? 1 : 0) & (j != next ? 1 : 0) & (1 - ((t >= lo ? 1 : 0) & (t <= hi ? 1 : 0)));
+}
+
+/* Best / second-best cost ratio. */
+FM_FN float fm_select_ratio(float cb, float second) {
+  return second < FM_COST_INVALID ? (second > 0.0f ? cb / second : 1.0f) : 0.0f;
+}
+
+/* The three steps for one pixel (cost of plane j at volume[j * stride]),
+ * with the unit ray r of the pixel. Returns 1 and writes the refined range,
+ * the best cost and the ratio; returns 0 when no plane has a valid cost (or
+ * the refined range is not positive). */
+FM_FN int fm_select_plane(const FM_GLOBAL float* volume, int stride, const FM_GLOBAL struct FmSweepPlane* planes,
+                          int n_planes, float rx, float ry, float rz, int subpixel, float* range,
+                          float* best_cost, float* ratio) {
+  int best = -1;
+  float cb = FM_COST_INVALID;
+  for (int j = 0; j < n_planes; ++j) {
+    float c = volume[j * stride];
+    if (c < cb) {
+      cb = c;
+      best = j;
+    }
+  }
+  if (best < 0) {
+    return 0;
+  }
+  int prev, next;
+  float lo, hi;
+  float t_best = fm_select_refine(volume, stride, planes, n_planes, best, cb, rx, ry, rz, subpixel, &prev, &next,
+                                  &lo, &hi);
   float second = FM_COST_INVALID;
   for (int j = 0; j < n_planes; ++j) {
-    if (j == best || j == prev || j == next) {
-      continue;
-    }
     float c = volume[j * stride];
     if (!(c < second)) {
       continue;
     }
-    float t = fm_plane_range(planes[j], rx, ry, rz);
-    if (t >= lo && t <= hi) {
-      continue;
+    if (fm_select_second_candidate(j, best, prev, next, fm_plane_range(planes[j], rx, ry, rz), lo, hi)) {
+      second = c;
     }
-    second = c;
   }
-  *range = fm_plane_range(pb, rx, ry, rz);
+  *range = t_best;
   *best_cost = cb;
-  *ratio = second < FM_COST_INVALID ? (second > 0.0f ? cb / second : 1.0f) : 0.0f;
+  *ratio = fm_select_ratio(cb, second);
   return *range > 0.0f;
 }
 

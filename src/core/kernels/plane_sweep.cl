@@ -29,12 +29,9 @@ __kernel void sweep_warp(__global const float* restrict rays, int npix, __global
                          __global float* restrict warped) {
   int pix = get_global_id(0);
   float rx = rays[3 * pix], ry = rays[3 * pix + 1], rz = rays[3 * pix + 2];
-  float t = fm_plane_range(planes[plane], rx, ry, rz);
-  int hit = t > 0.0f;
-  t = hit ? t : 1.0f;
+  float inv_t = fm_plane_inverse_range(planes[plane], rx, ry, rz);
   for (int v = 0; v < FM_SWEEP_VIEWS; ++v) {
-    float w = fm_warp_sample(&cams[v], &poses[v], images + offsets[v], t * rx, t * ry, t * rz);
-    warped[v * npix + pix] = hit ? w : -1.0f;
+    warped[v * npix + pix] = fm_warp_sample_ray(&cams[v], &poses[v], images + offsets[v], rx, ry, rz, inv_t);
   }
 }
 

@@ -1,0 +1,395 @@
+// The native CPU plane sweep's loops (see plane_sweep_native.cpp). No include
+// guard on purpose: plane_sweep_native.cpp includes this file once per
+// instruction set, inside a namespace of its own (native_generic,
+// native_avx2), with the target set by a pragma around the include. The
+// per-pixel maths are the shared functions of plane_sweep_shared.h and
+// camera_model_shared.h (the OpenCL kernels call the same ones); what is here
+// is only the loop structure: rows of contiguous floats that the compiler
+// vectorizes.
+
+// Per-thread scratch memory, grown on demand.
+struct Scratch {
+  std::vector<float> warped, p0, p1, p2, p3;  // one row each
+  std::vector<float> p00, p01, p10, p11, ax, ay;  // bilinear samples of a row
+  std::vector<int> i00, dx, dy, inside;
+  std::vector<float> cb, lo, hi, second, t_best;  // plane selection, per band pixel
+  std::vector<int> best, prev, next;
+  std::vector<float> h0, h1, h2, h3;          // horizontal window sums, (band + 2r) rows
+  std::vector<float> vcost;                   // per-view costs, views x band rows
+  std::vector<float> volume;                  // cost volume of the band, planes x band rows
+};
+
+// The four pixels of every bilinear sample of a row, loaded one by one: on
+// CPUs scalar loads beat gather instructions (not vectorized on purpose).
+__attribute__((optimize("no-tree-vectorize"))) inline void loadQuads(
+    const float* __restrict img, const int* __restrict i00, const int* __restrict dx, const int* __restrict dy, int w,
+    float* __restrict p00, float* __restrict p01, float* __restrict p10, float* __restrict p11) {
+  for (int x = 0; x < w; ++x) {
+    const float* a = img + i00[x];
+    const float* b = a + dy[x];
+    p00[x] = a[0];
+    p01[x] = a[dx[x]];
+    p10[x] = b[0];
+    p11[x] = b[dx[x]];
+  }
+}
+
+// The view's intensity at the plane point of every reference pixel of a row
+// (-1 where unusable): fm_warp_sample_ray of the shared header, cut into three
+// loops (project and set up the samples; load; blend) so that the first and
+// last vectorize. The camera model is a template argument so that its
+// dispatch folds away. Returns whether the plane meets any of the row's rays.
+template <int MODEL>
+FM_NATIVE_INLINE bool warpRowT(const float* __restrict rx, const float* __restrict ry, const float* __restrict rz,
+                               int w, FmSweepPlane plane, FmCameraT<float> cam, FmViewPose pose,
+                               const float* __restrict img, float* __restrict out, Scratch* s) {
+  cam.model = MODEL;
+  int hits = 0;
+  for (int x = 0; x < w; ++x) hits += fm_plane_inverse_range(plane, rx[x], ry[x], rz[x]) > 0.0f;
+  if (hits == 0) {
+    for (int x = 0; x < w; ++x) out[x] = -1.0f;
+    return false;
+  }
+  const int width = cam.width, height = cam.height;
+  int* __restrict i00 = s->i00.data();
+  int* __restrict dx = s->dx.data();
+  int* __restrict dy = s->dy.data();
+  int* __restrict inside = s->inside.data();
+  float* __restrict ax = s->ax.data();
+  float* __restrict ay = s->ay.data();
+#pragma omp simd
+  for (int x = 0; x < w; ++x) {
+    const float inv_t = fm_plane_inverse_range(plane, rx[x], ry[x], rz[x]);
+    float u, v;
+    const int ok = fm_warp_project_ray(&cam, &pose, rx[x], ry[x], rz[x], inv_t, &u, &v);
+    int a, b, c;
+    float e, f;
+    inside[x] = fm_bilinear_setup(width, height, ok ? u : -1.0f, ok ? v : -1.0f, &a, &b, &c, &e, &f);
+    i00[x] = a;
+    dx[x] = b;
+    dy[x] = c;
+    ax[x] = e;
+    ay[x] = f;
+  }
+  float* __restrict p00 = s->p00.data();
+  float* __restrict p01 = s->p01.data();
+  float* __restrict p10 = s->p10.data();
+  float* __restrict p11 = s->p11.data();
+  loadQuads(img, i00, dx, dy, w, p00, p01, p10, p11);
+  for (int x = 0; x < w; ++x) out[x] = fm_bilinear_blend(inside[x], p00[x], p01[x], p10[x], p11[x], ax[x], ay[x]);
+  return true;
+}
+
+inline bool warpRow(const float* rx, const float* ry, const float* rz, int w, const FmSweepPlane& plane,
+                    const FmCameraT<float>& cam, const FmViewPose& pose, const float* img, float* out, Scratch* s) {
+  switch (cam.model) {
+    case FM_MODEL_UNIFIED: return warpRowT<FM_MODEL_UNIFIED>(rx, ry, rz, w, plane, cam, pose, img, out, s);
+    case FM_MODEL_PINHOLE: return warpRowT<FM_MODEL_PINHOLE>(rx, ry, rz, w, plane, cam, pose, img, out, s);
+    case FM_MODEL_DOUBLE_SPHERE:
+      return warpRowT<FM_MODEL_DOUBLE_SPHERE>(rx, ry, rz, w, plane, cam, pose, img, out, s);
+    case FM_MODEL_KANNALA_BRANDT:
+      return warpRowT<FM_MODEL_KANNALA_BRANDT>(rx, ry, rz, w, plane, cam, pose, img, out, s);
+    default:
+      for (int x = 0; x < w; ++x) out[x] = -1.0f;
+      return false;
+  }
+}
+
+// h[x] = sum of p[x - r .. x + r] for x in [r, w - r), 0 elsewhere (a window
+// leaving the row never counts as complete). The radius is a template
+// argument: the taps unroll and each sum stays in a register while the pixel
+// loop vectorizes.
+template <int R>
+FM_NATIVE_INLINE void boxRowT(const float* __restrict p, float* __restrict h, int w) {
+  for (int x = 0; x < R && x < w; ++x) h[x] = 0.0f;
+  for (int x = R; x < w - R; ++x) {
+    float sum = 0.0f;
+    for (int d = -R; d <= R; ++d) sum += p[x + d];
+    h[x] = sum;
+  }
+  for (int x = std::max(R, w - R); x < w; ++x) h[x] = 0.0f;
+}
+
+inline void boxRow(const float* __restrict p, float* __restrict h, int w, int r) {
+  switch (r) {
+    case 1: boxRowT<1>(p, h, w); return;
+    case 2: boxRowT<2>(p, h, w); return;
+    case 3: boxRowT<3>(p, h, w); return;
+    case 4: boxRowT<4>(p, h, w); return;
+    case 5: boxRowT<5>(p, h, w); return;
+    case 6: boxRowT<6>(p, h, w); return;
+    case 7: boxRowT<7>(p, h, w); return;
+    default:
+      for (int x = 0; x < w; ++x) h[x] = 0.0f;
+      for (int d = -r; d <= r; ++d) {
+        for (int x = r; x < w - r; ++x) h[x] += p[x + d];
+      }
+  }
+}
+
+// Horizontal window sums of one warped row: W, W^2, W R (over usable
+// samples) and the count of usable samples.
+inline void rowSums(const float* __restrict warped, const float* __restrict ref, int w, int r, Scratch* s,
+                    float* __restrict h0, float* __restrict h1, float* __restrict h2, float* __restrict h3) {
+  float* __restrict p0 = s->p0.data();
+  float* __restrict p1 = s->p1.data();
+  float* __restrict p2 = s->p2.data();
+  float* __restrict p3 = s->p3.data();
+  for (int x = 0; x < w; ++x) {
+    const float q = warped[x];
+    const int ok = q >= 0.0f;
+    const float a = ok ? q : 0.0f;
+    p0[x] = a;
+    p1[x] = a * a;
+    p2[x] = a * ref[x];
+    p3[x] = ok ? 1.0f : 0.0f;
+  }
+  boxRow(p0, h0, w, r);
+  boxRow(p1, h1, w, r);
+  boxRow(p2, h2, w, r);
+  boxRow(p3, h3, w, r);
+}
+
+// out[x] = sum of rows 0 .. 2r of a (rows of w floats), the rows' count a
+// template argument as in boxRowT.
+template <int R>
+FM_NATIVE_INLINE void boxColumnT(const float* __restrict a, float* __restrict out, int w) {
+  for (int x = 0; x < w; ++x) {
+    float sum = 0.0f;
+    for (int dy = 0; dy <= 2 * R; ++dy) sum += a[static_cast<size_t>(dy) * w + x];
+    out[x] = sum;
+  }
+}
+
+inline void boxColumn(const float* __restrict a, float* __restrict out, int w, int r) {
+  switch (r) {
+    case 1: boxColumnT<1>(a, out, w); return;
+    case 2: boxColumnT<2>(a, out, w); return;
+    case 3: boxColumnT<3>(a, out, w); return;
+    case 4: boxColumnT<4>(a, out, w); return;
+    case 5: boxColumnT<5>(a, out, w); return;
+    case 6: boxColumnT<6>(a, out, w); return;
+    case 7: boxColumnT<7>(a, out, w); return;
+    default:
+      for (int x = 0; x < w; ++x) out[x] = a[x];
+      for (int dy = 1; dy <= 2 * r; ++dy) {
+        const float* __restrict row = a + static_cast<size_t>(dy) * w;
+        for (int x = 0; x < w; ++x) out[x] += row[x];
+      }
+  }
+}
+
+// s[x] += add[x] - sub[x]: the vertical window moved down one row.
+inline void slideColumn(float* __restrict sum, const float* __restrict add, const float* __restrict sub, int w) {
+  for (int x = 0; x < w; ++x) sum[x] += add[x] - sub[x];
+}
+
+// Vertical window sums of the horizontal sums for output row `j` of the band
+// (rows j .. j + 2r of the band's buffers): summed afresh for j = 0, then
+// slid down a row at a time (sums of at most band + 2r rows: float drift
+// stays far under the cost tolerance; the usable count stays exact), and the
+// ZNCC cost of every pixel of the row.
+inline void costRow(const Scratch& s, int w, int r, int j, const float* __restrict mean,
+                    const float* __restrict stdev, float* __restrict cost, Scratch* tmp) {
+  float* __restrict s0 = tmp->p0.data();
+  float* __restrict s1 = tmp->p1.data();
+  float* __restrict s2 = tmp->p2.data();
+  float* __restrict s3 = tmp->p3.data();
+  if (j == 0) {
+    boxColumn(s.h0.data(), s0, w, r);
+    boxColumn(s.h1.data(), s1, w, r);
+    boxColumn(s.h2.data(), s2, w, r);
+    boxColumn(s.h3.data(), s3, w, r);
+  } else {
+    const size_t in = static_cast<size_t>(j + 2 * r) * w, out = static_cast<size_t>(j - 1) * w;
+    slideColumn(s0, s.h0.data() + in, s.h0.data() + out, w);
+    slideColumn(s1, s.h1.data() + in, s.h1.data() + out, w);
+    slideColumn(s2, s.h2.data() + in, s.h2.data() + out, w);
+    slideColumn(s3, s.h3.data() + in, s.h3.data() + out, w);
+  }
+  const float n = static_cast<float>((2 * r + 1) * (2 * r + 1));
+  for (int x = 0; x < w; ++x) {
+    const float c = fm_zncc_cost(n, s0[x], s1[x], s2[x], mean[x], stdev[x]);
+    cost[x] = s3[x] == n ? c : FM_COST_INVALID;
+  }
+}
+
+// Aggregated cost of each pixel over V views' cost rows (V a compile-time
+// count, so the per-pixel loops unroll and the pixel loop vectorizes).
+template <int V, int MODE>
+FM_NATIVE_INLINE void aggregateT(const float* vcost, size_t stride, int len, int k, float* __restrict out) {
+#pragma omp simd
+  for (int i = 0; i < len; ++i) {
+    float c[V];
+    for (int v = 0; v < V; ++v) c[v] = vcost[v * stride + i];
+    out[i] = fm_aggregate(c, V, MODE, k);
+  }
+}
+
+template <int MODE>
+inline void aggregateMode(int views, const float* vcost, size_t stride, int len, int k, float* out) {
+  switch (views) {
+    case 1: aggregateT<1, MODE>(vcost, stride, len, k, out); break;
+    case 2: aggregateT<2, MODE>(vcost, stride, len, k, out); break;
+    case 3: aggregateT<3, MODE>(vcost, stride, len, k, out); break;
+    case 4: aggregateT<4, MODE>(vcost, stride, len, k, out); break;
+    case 5: aggregateT<5, MODE>(vcost, stride, len, k, out); break;
+    case 6: aggregateT<6, MODE>(vcost, stride, len, k, out); break;
+    case 7: aggregateT<7, MODE>(vcost, stride, len, k, out); break;
+    default: aggregateT<FM_SWEEP_MAX_VIEWS, MODE>(vcost, stride, len, k, out); break;
+  }
+}
+
+// Aggregated cost of each pixel over the views' cost rows; the view count and
+// the mode are template arguments, so the per-pixel loops unroll and the
+// mode's branch folds away.
+inline void aggregate(int views, const float* vcost, size_t stride, int len, int mode, int k, float* out) {
+  if (mode == FM_AGGREGATE_BEST_K) {
+    aggregateMode<FM_AGGREGATE_BEST_K>(views, vcost, stride, len, k, out);
+  } else {
+    aggregateMode<FM_AGGREGATE_AVERAGE>(views, vcost, stride, len, k, out);
+  }
+}
+
+inline void selectBand(const NativeLevel& L, int y0, size_t band_pix, Scratch* s);
+
+// One band of output rows [y0, y1): the band's cost volume, then the best
+// plane of each of its pixels.
+inline void sweepBand(const NativeLevel& L, int y0, int y1, Scratch* s) {
+  const int w = L.w, h = L.h, r = L.r;
+  const int rows = y1 - y0;               // output rows
+  const int wrows = rows + 2 * r;         // warped rows, y0 - r .. y1 + r - 1
+  const size_t band_pix = static_cast<size_t>(rows) * w;
+  auto grow = [](std::vector<float>& v, size_t n) {
+    if (v.size() < n) v.resize(n);
+  };
+  for (auto* v : {&s->warped, &s->p0, &s->p1, &s->p2, &s->p3, &s->p00, &s->p01, &s->p10, &s->p11, &s->ax, &s->ay})
+    grow(*v, w);
+  for (auto* v : {&s->i00, &s->dx, &s->dy, &s->inside}) {
+    if (v->size() < static_cast<size_t>(w)) v->resize(w);
+  }
+  for (auto* v : {&s->h0, &s->h1, &s->h2, &s->h3}) grow(*v, static_cast<size_t>(wrows) * w);
+  grow(s->vcost, band_pix * L.views);
+  grow(s->volume, band_pix * L.n_planes);
+  Scratch tmp;  // row sums of costRow (small; separate from the warp's rows)
+  tmp.p0.resize(w);
+  tmp.p1.resize(w);
+  tmp.p2.resize(w);
+  tmp.p3.resize(w);
+
+  for (int p = 0; p < L.n_planes; ++p) {
+    float* vol = s->volume.data() + p * band_pix;
+    bool any = false;
+    for (int v = 0; v < L.views; ++v) {
+      bool view_hit = false;
+      for (int j = 0; j < wrows; ++j) {
+        const int y = y0 - r + j;
+        const size_t o = static_cast<size_t>(j) * w;
+        float *h0 = s->h0.data() + o, *h1 = s->h1.data() + o, *h2 = s->h2.data() + o, *h3 = s->h3.data() + o;
+        bool hit = false;
+        if (y >= 0 && y < h) {
+          const size_t ro = static_cast<size_t>(y) * w;
+          hit = warpRow(L.rx + ro, L.ry + ro, L.rz + ro, w, L.planes[p], L.cams[v], L.poses[v], L.images[v],
+                        s->warped.data(), s);
+        }
+        if (hit) {
+          rowSums(s->warped.data(), L.ref + static_cast<size_t>(y) * w, w, r, s, h0, h1, h2, h3);
+          view_hit = true;
+        } else {
+          for (int x = 0; x < w; ++x) h0[x] = h1[x] = h2[x] = h3[x] = 0.0f;
+        }
+      }
+      float* vc = s->vcost.data() + v * band_pix;
+      if (!view_hit) {
+        for (size_t i = 0; i < band_pix; ++i) vc[i] = FM_COST_INVALID;
+        continue;
+      }
+      any = true;
+      for (int j = 0; j < rows; ++j) {
+        const size_t ro = static_cast<size_t>(y0 + j) * w;
+        costRow(*s, w, r, j, L.mean + ro, L.stdev + ro, vc + static_cast<size_t>(j) * w, &tmp);
+      }
+    }
+    if (!any) {
+      for (size_t i = 0; i < band_pix; ++i) vol[i] = FM_COST_INVALID;
+      continue;
+    }
+    aggregate(L.views, s->vcost.data(), band_pix, static_cast<int>(band_pix), L.mode, L.k, vol);
+  }
+
+  selectBand(L, y0, band_pix, s);
+}
+
+// Winner takes all for the pixels of a band: the steps of fm_select_plane
+// (shared header), run plane by plane over all the band's pixels so that the
+// two passes over the planes vectorize.
+inline void selectBand(const NativeLevel& L, int y0, size_t band_pix, Scratch* s) {
+  const size_t first = static_cast<size_t>(y0) * L.w;
+  const float* __restrict rx = L.rx + first;
+  const float* __restrict ry = L.ry + first;
+  const float* __restrict rz = L.rz + first;
+  for (auto* v : {&s->cb, &s->lo, &s->hi, &s->second, &s->t_best}) {
+    if (v->size() < band_pix) v->resize(band_pix);
+  }
+  for (auto* v : {&s->best, &s->prev, &s->next}) {
+    if (v->size() < band_pix) v->resize(band_pix);
+  }
+  float* __restrict cb = s->cb.data();
+  int* __restrict best = s->best.data();
+  for (size_t i = 0; i < band_pix; ++i) {
+    cb[i] = FM_COST_INVALID;
+    best[i] = -1;
+  }
+  for (int j = 0; j < L.n_planes; ++j) {
+    const float* __restrict vj = s->volume.data() + j * band_pix;
+    for (size_t i = 0; i < band_pix; ++i) {
+      const int better = vj[i] < cb[i];
+      cb[i] = better ? vj[i] : cb[i];
+      best[i] = better ? j : best[i];
+    }
+  }
+  int* __restrict prev = s->prev.data();
+  int* __restrict next = s->next.data();
+  float* __restrict lo = s->lo.data();
+  float* __restrict hi = s->hi.data();
+  float* __restrict t_best = s->t_best.data();
+  float* __restrict second = s->second.data();
+  for (size_t i = 0; i < band_pix; ++i) {
+    second[i] = FM_COST_INVALID;
+    if (best[i] < 0) {
+      prev[i] = next[i] = -1;
+      lo[i] = hi[i] = t_best[i] = 0.0f;
+      continue;
+    }
+    t_best[i] = fm_select_refine(s->volume.data() + i, static_cast<int>(band_pix), L.planes, L.n_planes, best[i], cb[i],
+                                 rx[i], ry[i], rz[i], L.subpixel, &prev[i], &next[i], &lo[i], &hi[i]);
+  }
+  for (int j = 0; j < L.n_planes; ++j) {
+    const float* __restrict vj = s->volume.data() + j * band_pix;
+    const FmSweepPlane plane = L.planes[j];
+    for (size_t i = 0; i < band_pix; ++i) {
+      const float t = fm_plane_range(plane, rx[i], ry[i], rz[i]);
+      const int take = (vj[i] < second[i] ? 1 : 0) & fm_select_second_candidate(j, best[i], prev[i], next[i], t, lo[i], hi[i]);
+      second[i] = take ? vj[i] : second[i];
+    }
+  }
+  for (size_t i = 0; i < band_pix; ++i) {
+    const bool ok = best[i] >= 0 && t_best[i] > 0.0f;
+    L.out_range[first + i] = ok ? t_best[i] : NAN;
+    L.out_cost[first + i] = ok ? cb[i] : NAN;
+    L.out_ratio[first + i] = ok ? fm_select_ratio(cb[i], second[i]) : NAN;
+  }
+}
+
+// The whole level: bands of L.band rows shared out to the OpenMP threads.
+inline void sweepLevel(const NativeLevel& L) {
+  const int bands = (L.h + L.band - 1) / L.band;
+#pragma omp parallel
+  {
+    Scratch s;
+#pragma omp for schedule(dynamic, 1)
+    for (int b = 0; b < bands; ++b) {
+      sweepBand(L, b * L.band, std::min(L.h, (b + 1) * L.band), &s);
+    }
+  }
+}

@@ -1,0 +1,255 @@
+// paced_player: plays a logged drive (rosbag) so that no frame set is lost,
+// whatever the speed of the machine. It publishes /clock and the bag's
+// messages in order, and before each new frame set (a new stamp on the
+// reference camera) it waits until the pipeline has finished the previous one:
+// the TSDF fusion stage sends a fisheye_mapping/FrameDone per depth frame
+// (topic ~done_topic). A frame set that is not finished within ~timeout
+// seconds is counted as timed out and the drive goes on.
+//
+//   rosrun fisheye_mapping paced_player _bag:=drive.bag _camchain:=camchain.yaml _mount:=mount.yaml
+//
+// Parameters (private):
+//   bag            the rosbag (required)
+//   camchain, mount  the rig (Kalibr camchain + mount) whose cameras'
+//                  `rostopic` fields name the image topics (or image_topics:
+//                  a list)
+//   reference_topic  the reference camera's image topic (default: the first)
+//   done_topic     default /fusion_done
+//   timeout        seconds to wait for one frame set (default 120)
+//   wait_subscribers  seconds to wait for the pipeline to subscribe (default 120)
+//   start          seconds into the bag to begin (default 0)
+//   require_tf     the bag must hold /tf (default true: the map needs poses)
+//   summary_file   YAML with the counts, written at the end (optional)
+//
+// Exit status: 0 when the drive was played to its end, 1 on bad input (no bag,
+// a camera topic or /tf missing, stamps going backwards: the message names
+// it), 2 on bad parameters. On stamps going backwards it stops there, after
+// the pipeline has finished the frame sets already played.
+#include <ros/ros.h>
+#include <rosbag/bag.h>
+#include <rosbag/view.h>
+#include <rosgraph_msgs/Clock.h>
+#include <std_msgs/Header.h>
+#include <sensor_msgs/CompressedImage.h>
+#include <sensor_msgs/Image.h>
+
+#include <chrono>
+#include <cmath>
+#include <condition_variable>
+#include <cstdio>
+#include <fstream>
+#include <map>
+#include <mutex>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "fisheye_mapping/FrameDone.h"
+#include "fisheye_mapping/core/frame_pacer.h"
+#include "fisheye_mapping/core/rig.h"
+
+namespace fm = fisheye_mapping;
+
+namespace {
+
+// The header stamp of an image message (raw or compressed); NaN otherwise.
+double imageStamp(const rosbag::MessageInstance& m) {
+  if (auto img = m.instantiate<sensor_msgs::Image>()) return img->header.stamp.toSec();
+  if (auto img = m.instantiate<sensor_msgs::CompressedImage>()) return img->header.stamp.toSec();
+  return NAN;
+}
+
+struct Done {
+  std::mutex mutex;
+  std::condition_variable cv;
+  std::map<double, bool> frames;  // stamp -> fused
+  std::map<double, std::string> reasons;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  ros::init(argc, argv, "paced_player");
+  ros::NodeHandle nh, pnh("~");
+  std::string bag_path, camchain, mount, reference_topic, done_topic = "/fusion_done", summary_file;
+  std::vector<std::string> image_topics;
+  double timeout = 120.0, wait_subscribers = 120.0, start = 0.0;
+  bool require_tf = true;
+  pnh.getParam("bag", bag_path);
+  pnh.getParam("camchain", camchain);
+  pnh.getParam("mount", mount);
+  pnh.getParam("image_topics", image_topics);
+  pnh.getParam("reference_topic", reference_topic);
+  pnh.getParam("done_topic", done_topic);
+  pnh.getParam("timeout", timeout);
+  pnh.getParam("wait_subscribers", wait_subscribers);
+  pnh.getParam("start", start);
+  pnh.getParam("require_tf", require_tf);
+  pnh.getParam("summary_file", summary_file);
+  if (bag_path.empty()) {
+    ROS_FATAL("paced_player: parameter ~bag (the rosbag to play) is required");
+    return 2;
+  }
+  if (image_topics.empty()) {
+    if (camchain.empty() || mount.empty()) {
+      ROS_FATAL("paced_player: give ~camchain and ~mount (the cameras' rostopic fields) or ~image_topics");
+      return 2;
+    }
+    try {
+      for (const auto& c : fm::loadKalibrRig(camchain, mount).cameras) {
+        if (c.rostopic.empty()) throw std::runtime_error("camera " + c.name + " has no rostopic field");
+        image_topics.push_back(c.rostopic);
+      }
+    } catch (const std::exception& e) {
+      ROS_FATAL("paced_player: rig %s: %s", camchain.c_str(), e.what());
+      return 2;
+    }
+  }
+  if (reference_topic.empty()) reference_topic = image_topics.front();
+  std::unique_ptr<fm::FramePacer> pacer;
+  try {
+    pacer = std::make_unique<fm::FramePacer>(reference_topic, image_topics);
+  } catch (const std::exception& e) {
+    ROS_FATAL("paced_player: %s", e.what());
+    return 2;
+  }
+
+  rosbag::Bag bag;
+  try {
+    bag.open(bag_path, rosbag::bagmode::Read);
+  } catch (const std::exception& e) {
+    ROS_FATAL("paced_player: cannot read the bag %s: %s", bag_path.c_str(), e.what());
+    return 1;
+  }
+  // Input checks before anything is published.
+  std::set<std::string> bag_topics;
+  {
+    rosbag::View all(bag);
+    for (const auto* c : all.getConnections()) bag_topics.insert(c->topic);
+  }
+  for (const auto& t : image_topics) {
+    if (!bag_topics.count(t)) {
+      ROS_FATAL("paced_player: the bag %s has no messages on %s (a camera of the rig): nothing to map",
+                bag_path.c_str(), t.c_str());
+      return 1;
+    }
+  }
+  if (require_tf && !bag_topics.count("/tf")) {
+    ROS_FATAL("paced_player: the bag %s has no /tf: the map needs the vehicle's poses (map -> base_link) at every "
+              "frame set (set ~require_tf false if they come from elsewhere)",
+              bag_path.c_str());
+    return 1;
+  }
+
+  Done done;
+  ros::Subscriber done_sub = nh.subscribe<fm::FrameDone>(done_topic, 100, [&](const fm::FrameDone::ConstPtr& msg) {
+    std::lock_guard<std::mutex> lock(done.mutex);
+    done.frames[msg->header.stamp.toSec()] = msg->fused;
+    if (!msg->fused) done.reasons[msg->header.stamp.toSec()] = msg->reason;
+    done.cv.notify_all();
+  });
+  ros::AsyncSpinner spinner(1);
+  spinner.start();
+
+  ros::Publisher clock_pub = nh.advertise<rosgraph_msgs::Clock>("/clock", 10);
+  std::map<std::string, ros::Publisher> pubs;
+  rosbag::View view(bag);
+  const ros::Time begin = view.getBeginTime() + ros::Duration(start);
+  rosbag::View play(bag, begin, ros::TIME_MAX);
+  for (const auto* c : play.getConnections()) {
+    if (pubs.count(c->topic)) continue;
+    ros::AdvertiseOptions opts(c->topic, 100, c->md5sum, c->datatype, c->msg_def);
+    opts.latch = c->topic == "/tf_static";
+    pubs[c->topic] = nh.advertise(opts);
+  }
+
+  // Wait until the pipeline listens: every image topic subscribed, and the
+  // fusion stage's done topic published.
+  const auto t_wait = std::chrono::steady_clock::now();
+  for (;;) {
+    std::string missing;
+    for (const auto& t : image_topics) {
+      if (pubs[t].getNumSubscribers() == 0) missing = "nothing subscribes to " + t;
+    }
+    if (missing.empty() && done_sub.getNumPublishers() == 0) missing = "nothing publishes " + done_topic;
+    if (missing.empty()) break;
+    if (!ros::ok()) return 1;
+    if (std::chrono::duration<double>(std::chrono::steady_clock::now() - t_wait).count() > wait_subscribers) {
+      ROS_FATAL("paced_player: after %.0f s, %s: is the pipeline (vehicle.launch) running?", wait_subscribers,
+                missing.c_str());
+      return 1;
+    }
+    ros::WallDuration(0.1).sleep();
+  }
+  ros::WallDuration(0.5).sleep();  // connections settle
+
+  int timed_out = 0, bad_input = 0;
+  std::vector<double> played;
+  auto waitFor = [&](double stamp) {
+    std::unique_lock<std::mutex> lock(done.mutex);
+    const bool got = done.cv.wait_for(lock, std::chrono::duration<double>(timeout), [&] {
+      return done.frames.count(stamp) > 0 || !ros::ok();
+    });
+    if (!got) {
+      ++timed_out;
+      ROS_WARN("paced_player: frame set %.3f not finished by the pipeline within %.0f s; going on", stamp, timeout);
+    }
+  };
+  const auto t0 = std::chrono::steady_clock::now();
+  int last_progress = -1;
+  const double duration = (view.getEndTime() - begin).toSec();
+  for (const rosbag::MessageInstance& m : play) {
+    if (!ros::ok()) break;
+    const std::string& topic = m.getTopic();
+    const double stamp = pacer->isImageTopic(topic) ? imageStamp(m) : 0.0;
+    if (std::isnan(stamp)) {
+      ROS_ERROR("paced_player: %s is not a sensor_msgs/Image or CompressedImage topic; stopping", topic.c_str());
+      bad_input = 1;
+      break;
+    }
+    const fm::FramePacer::Step step = pacer->next(topic, stamp);
+    if (step.kind == fm::FramePacer::Step::kStampsBackwards) {
+      ROS_ERROR("paced_player: %s; stopping here (a bag played twice or a clock reset?)", step.error.c_str());
+      bad_input = 1;
+      break;
+    }
+    if (step.kind == fm::FramePacer::Step::kWaitThenPublish) waitFor(step.wait_for);
+    if (topic == reference_topic && (played.empty() || played.back() != stamp)) played.push_back(stamp);
+    rosgraph_msgs::Clock clock;
+    clock.clock = m.getTime();
+    clock_pub.publish(clock);
+    pubs[topic].publish(m);
+    const int progress = static_cast<int>(100.0 * (m.getTime() - begin).toSec() / std::max(duration, 1e-9));
+    if (progress / 10 != last_progress / 10) {
+      last_progress = progress;
+      ROS_INFO("paced_player: %3d %% of the drive, %zu frame sets played", progress, played.size());
+    }
+  }
+  if (!played.empty() && ros::ok()) waitFor(played.back());
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+
+  int fused = 0, skipped = 0;
+  {
+    std::lock_guard<std::mutex> lock(done.mutex);
+    for (double s : played) {
+      auto it = done.frames.find(s);
+      if (it == done.frames.end()) continue;
+      if (it->second) {
+        ++fused;
+      } else {
+        ++skipped;
+        ROS_WARN("paced_player: frame set %.3f not fused: %s", s, done.reasons[s].c_str());
+      }
+    }
+  }
+  ROS_INFO("paced_player: frame sets %zu played, %d fused, %d skipped, %d timed out; %.1f s (%.2f frame sets/s)",
+           played.size(), fused, skipped, timed_out, wall, played.size() / std::max(wall, 1e-9));
+  if (!summary_file.empty()) {
+    std::ofstream f(summary_file);
+    f << "played: " << played.size() << "\nfused: " << fused << "\nskipped: " << skipped
+      << "\ntimed_out: " << timed_out << "\nstopped_on_bad_input: " << (bad_input ? "true" : "false")
+      << "\nwall_s: " << wall << "\n";
+  }
+  spinner.stop();
+  return bad_input ? 1 : 0;
+}
