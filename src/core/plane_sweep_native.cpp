@@ -19,8 +19,12 @@
 //     runs everywhere and uses 8-wide vectors where it can.
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
+#include <cstdint>
 #include <cstring>
 #include <vector>
+
+#include <omp.h>
 
 #include "fisheye_mapping/core/plane_sweep.h"
 
@@ -39,12 +43,17 @@ struct NativeLevel {
   const float* stdev = nullptr;
   const FmCameraT<float>* cams = nullptr;
   const FmViewPose* poses = nullptr;
-  const float* const* images = nullptr;  // -1 where self-masked
+  const uint16_t* const* quads = nullptr;  // per view: 4 units per pixel (see loadQuads)
   const FmSweepPlane* planes = nullptr;
   float* out_range = nullptr;  // w x h each
   float* out_cost = nullptr;
   float* out_ratio = nullptr;
 };
+
+// Quad images hold intensities in [0, 1] as round(v * kQuadScale), and
+// kQuadMasked where self-masked (8-bit images are off by at most 8e-6).
+constexpr float kQuadScale = 65534.0f;
+constexpr uint16_t kQuadMasked = 65535;
 
 #define FM_NATIVE_INLINE [[gnu::always_inline]] inline
 namespace native_generic {
@@ -59,9 +68,25 @@ namespace native_avx2 {
 #include "plane_sweep_native_impl.h"  // NOLINT(build/include)
 }  // namespace native_avx2
 #pragma GCC pop_options
+#pragma GCC push_options
+#pragma GCC target("avx512f,avx512vl,avx512dq,avx512bw,avx2,fma,prefer-vector-width=512")
+namespace native_avx512 {
+#include "plane_sweep_native_impl.h"  // NOLINT(build/include)
+}  // namespace native_avx512
+#pragma GCC pop_options
 #endif
 
 namespace {
+
+bool cpuHasAvx512() {
+#ifdef FM_NATIVE_HAVE_AVX2
+  __builtin_cpu_init();
+  return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
+         __builtin_cpu_supports("avx512dq") && __builtin_cpu_supports("avx512bw") && getenv("FM_NO_AVX512") == nullptr;
+#else
+  return false;
+#endif
+}
 
 bool cpuHasAvx2() {
 #ifdef FM_NATIVE_HAVE_AVX2
@@ -74,9 +99,9 @@ bool cpuHasAvx2() {
 
 class NativeSweepBackend : public SweepBackend {
  public:
-  NativeSweepBackend() : avx2_(cpuHasAvx2()) {}
+  NativeSweepBackend() : avx2_(cpuHasAvx2()), avx512_(cpuHasAvx512()) {}
 
-  std::string name() const override { return std::string("native cpu (") + (avx2_ ? "avx2+fma" : "baseline") + ")"; }
+  std::string name() const override { return std::string("native cpu (") + (avx512_ ? "avx512" : avx2_ ? "avx2+fma" : "baseline") + ")"; }
 
   void sweep(const SweepLevel& level, const std::vector<FmSweepPlane>& planes, const PlaneSweepConfig& config,
              cv::Mat* range, cv::Mat* cost, cv::Mat* ratio) override {
@@ -97,11 +122,34 @@ class NativeSweepBackend : public SweepBackend {
       soa.version = level.rays_version;
     }
     const cv::Mat ref = continuous(level.ref), mean = continuous(level.ref_mean), stdev = continuous(level.ref_std);
-    std::vector<cv::Mat> images;
-    std::vector<const float*> image_ptrs;
-    for (const auto& im : level.images) {
-      images.push_back(continuous(im));
-      image_ptrs.push_back(images.back().ptr<float>());
+    // Each view's quad image: per pixel, the four pixels a bilinear sample
+    // whose top-left pixel it is reads (steps clamped at the last column and
+    // row as in fm_bilinear_setup), in 16-bit units, so that a sample is one
+    // 8-byte load.
+    quads_.resize(level.images.size());
+    std::vector<const uint16_t*> quad_ptrs;
+    for (size_t v = 0; v < level.images.size(); ++v) {
+      const cv::Mat im = continuous(level.images[v]);
+      const int iw = im.cols, ih = im.rows;
+      std::vector<uint16_t>& q = quads_[v];
+      q.resize(4 * im.total());
+#pragma omp parallel for schedule(static)
+      for (int y = 0; y < ih; ++y) {
+        const float* row = im.ptr<float>(y);
+        const float* below = im.ptr<float>(y + 1 < ih ? y + 1 : y);
+        uint16_t* out = q.data() + 4 * static_cast<size_t>(y) * iw;
+        auto unit = [](float f) -> uint16_t {
+          return f < 0.0f ? kQuadMasked : static_cast<uint16_t>(std::lround(std::min(f, 1.0f) * kQuadScale));
+        };
+        for (int x = 0; x < iw; ++x) {
+          const int x1 = x + 1 < iw ? x + 1 : x;
+          out[4 * x] = unit(row[x]);
+          out[4 * x + 1] = unit(row[x1]);
+          out[4 * x + 2] = unit(below[x]);
+          out[4 * x + 3] = unit(below[x1]);
+        }
+      }
+      quad_ptrs.push_back(q.data());
     }
     *range = cv::Mat(h, w, CV_32FC1);
     *cost = cv::Mat(h, w, CV_32FC1);
@@ -126,12 +174,16 @@ class NativeSweepBackend : public SweepBackend {
     L.stdev = stdev.ptr<float>();
     L.cams = level.cameras.data();
     L.poses = level.poses.data();
-    L.images = image_ptrs.data();
+    L.quads = quad_ptrs.data();
     L.planes = planes.data();
     L.out_range = range->ptr<float>();
     L.out_cost = cost->ptr<float>();
     L.out_ratio = ratio->ptr<float>();
 #ifdef FM_NATIVE_HAVE_AVX2
+    if (avx512_) {
+      native_avx512::sweepLevel(L);
+      return;
+    }
     if (avx2_) {
       native_avx2::sweepLevel(L);
       return;
@@ -147,7 +199,8 @@ class NativeSweepBackend : public SweepBackend {
   };
   static cv::Mat continuous(const cv::Mat& m) { return m.isContinuous() ? m : m.clone(); }
 
-  bool avx2_;
+  bool avx2_, avx512_;
+  std::vector<std::vector<uint16_t>> quads_;
   Soa soa_[3];
 };
 

@@ -9,9 +9,10 @@
 
 // Per-thread scratch memory, grown on demand.
 struct Scratch {
-  std::vector<float> warped, p0, p1, p2, p3;  // one row each
-  std::vector<float> p00, p01, p10, p11, ax, ay;  // bilinear samples of a row
-  std::vector<int> i00, dx, dy, inside;
+  std::vector<float> warped, p0, p1, p2, p3, t3;  // one row each
+  std::vector<uint16_t> quad;        // bilinear samples of a row: 4 pixels each
+  std::vector<float> ax, ay;
+  std::vector<int> i00, inside;
   std::vector<float> cb, lo, hi, second, t_best;  // plane selection, per band pixel
   std::vector<int> best, prev, next;
   std::vector<float> h0, h1, h2, h3;          // horizontal window sums, (band + 2r) rows
@@ -19,30 +20,32 @@ struct Scratch {
   std::vector<float> volume;                  // cost volume of the band, planes x band rows
 };
 
-// The four pixels of every bilinear sample of a row, loaded one by one: on
-// CPUs scalar loads beat gather instructions (not vectorized on purpose).
-__attribute__((optimize("no-tree-vectorize"))) inline void loadQuads(
-    const float* __restrict img, const int* __restrict i00, const int* __restrict dx, const int* __restrict dy, int w,
-    float* __restrict p00, float* __restrict p01, float* __restrict p10, float* __restrict p11) {
-  for (int x = 0; x < w; ++x) {
-    const float* a = img + i00[x];
-    const float* b = a + dy[x];
-    p00[x] = a[0];
-    p01[x] = a[dx[x]];
-    p10[x] = b[0];
-    p11[x] = b[dx[x]];
-  }
+// The four pixels of every bilinear sample of a row, from the view's quad
+// image (NativeLevel::quads: for each pixel, the pixel and its right, lower
+// and lower-right neighbours, clamped at the border as fm_bilinear_setup's
+// steps are, as 16-bit units, kQuadMasked where self-masked): one 8-byte load
+// per sample, and a quarter of the float image's cache footprint. Scalar on
+// purpose: on CPUs plain loads beat gather instructions.
+__attribute__((optimize("no-tree-vectorize"))) inline void loadQuads(const uint16_t* __restrict quads,
+                                                                   const int* __restrict i00, int w,
+                                                                   uint16_t* __restrict out) {
+  for (int x = 0; x < w; ++x) std::memcpy(out + 4 * x, quads + 4 * static_cast<size_t>(i00[x]), 8);
+}
+
+// A quad image unit back to the sweep's intensity: [0, 1], -1 where masked.
+FM_NATIVE_INLINE float quadValue(uint16_t q) {
+  return q == kQuadMasked ? -1.0f : static_cast<float>(q) * (1.0f / kQuadScale);
 }
 
 // The view's intensity at the plane point of every reference pixel of a row
 // (-1 where unusable): fm_warp_sample_ray of the shared header, cut into three
 // loops (project and set up the samples; load; blend) so that the first and
 // last vectorize. The camera model is a template argument so that its
-// dispatch folds away. Returns whether the plane meets any of the row's rays.
+// dispatch folds away. Returns whether any sample of the row is usable.
 template <int MODEL>
 FM_NATIVE_INLINE bool warpRowT(const float* __restrict rx, const float* __restrict ry, const float* __restrict rz,
                                int w, FmSweepPlane plane, FmCameraT<float> cam, FmViewPose pose,
-                               const float* __restrict img, float* __restrict out, Scratch* s) {
+                               const uint16_t* __restrict quads, float* __restrict out, Scratch* s) {
   cam.model = MODEL;
   int hits = 0;
   for (int x = 0; x < w; ++x) hits += fm_plane_inverse_range(plane, rx[x], ry[x], rz[x]) > 0.0f;
@@ -52,8 +55,6 @@ FM_NATIVE_INLINE bool warpRowT(const float* __restrict rx, const float* __restri
   }
   const int width = cam.width, height = cam.height;
   int* __restrict i00 = s->i00.data();
-  int* __restrict dx = s->dx.data();
-  int* __restrict dy = s->dy.data();
   int* __restrict inside = s->inside.data();
   float* __restrict ax = s->ax.data();
   float* __restrict ay = s->ay.data();
@@ -65,30 +66,44 @@ FM_NATIVE_INLINE bool warpRowT(const float* __restrict rx, const float* __restri
     int a, b, c;
     float e, f;
     inside[x] = fm_bilinear_setup(width, height, ok ? u : -1.0f, ok ? v : -1.0f, &a, &b, &c, &e, &f);
-    i00[x] = a;
-    dx[x] = b;
-    dy[x] = c;
+    i00[x] = a;  // the steps b, c are in the quad image already
+    (void)b;
+    (void)c;
     ax[x] = e;
     ay[x] = f;
   }
-  float* __restrict p00 = s->p00.data();
-  float* __restrict p01 = s->p01.data();
-  float* __restrict p10 = s->p10.data();
-  float* __restrict p11 = s->p11.data();
-  loadQuads(img, i00, dx, dy, w, p00, p01, p10, p11);
-  for (int x = 0; x < w; ++x) out[x] = fm_bilinear_blend(inside[x], p00[x], p01[x], p10[x], p11[x], ax[x], ay[x]);
+  uint16_t* __restrict q = s->quad.data();
+  // Only the span of the row that lands inside the view is loaded and blended
+  // (a side camera sees part of the reference's rows).
+  int first = 0, last = w - 1;
+  while (first < w && !inside[first]) ++first;
+  while (last > first && !inside[last]) --last;
+  if (first == w) {
+    for (int x = 0; x < w; ++x) out[x] = -1.0f;
+    return false;
+  }
+  const int span = last - first + 1;
+  loadQuads(quads, i00 + first, span, q);
+  for (int x = 0; x < first; ++x) out[x] = -1.0f;
+  float* __restrict o = out + first;
+  for (int x = 0; x < span; ++x) {
+    o[x] = fm_bilinear_blend(inside[first + x], quadValue(q[4 * x]), quadValue(q[4 * x + 1]),
+                             quadValue(q[4 * x + 2]), quadValue(q[4 * x + 3]), ax[first + x], ay[first + x]);
+  }
+  for (int x = last + 1; x < w; ++x) out[x] = -1.0f;
   return true;
 }
 
 inline bool warpRow(const float* rx, const float* ry, const float* rz, int w, const FmSweepPlane& plane,
-                    const FmCameraT<float>& cam, const FmViewPose& pose, const float* img, float* out, Scratch* s) {
+                    const FmCameraT<float>& cam, const FmViewPose& pose, const uint16_t* quads, float* out,
+                    Scratch* s) {
   switch (cam.model) {
-    case FM_MODEL_UNIFIED: return warpRowT<FM_MODEL_UNIFIED>(rx, ry, rz, w, plane, cam, pose, img, out, s);
-    case FM_MODEL_PINHOLE: return warpRowT<FM_MODEL_PINHOLE>(rx, ry, rz, w, plane, cam, pose, img, out, s);
+    case FM_MODEL_UNIFIED: return warpRowT<FM_MODEL_UNIFIED>(rx, ry, rz, w, plane, cam, pose, quads, out, s);
+    case FM_MODEL_PINHOLE: return warpRowT<FM_MODEL_PINHOLE>(rx, ry, rz, w, plane, cam, pose, quads, out, s);
     case FM_MODEL_DOUBLE_SPHERE:
-      return warpRowT<FM_MODEL_DOUBLE_SPHERE>(rx, ry, rz, w, plane, cam, pose, img, out, s);
+      return warpRowT<FM_MODEL_DOUBLE_SPHERE>(rx, ry, rz, w, plane, cam, pose, quads, out, s);
     case FM_MODEL_KANNALA_BRANDT:
-      return warpRowT<FM_MODEL_KANNALA_BRANDT>(rx, ry, rz, w, plane, cam, pose, img, out, s);
+      return warpRowT<FM_MODEL_KANNALA_BRANDT>(rx, ry, rz, w, plane, cam, pose, quads, out, s);
     default:
       for (int x = 0; x < w; ++x) out[x] = -1.0f;
       return false;
@@ -100,25 +115,30 @@ inline bool warpRow(const float* rx, const float* ry, const float* rz, int w, co
 // argument: the taps unroll and each sum stays in a register while the pixel
 // loop vectorizes.
 template <int R>
-FM_NATIVE_INLINE void boxRowT(const float* __restrict p, float* __restrict h, int w) {
+FM_NATIVE_INLINE void boxRowT(const float* __restrict p, float* __restrict h, float* __restrict t, int w) {
+  // The 2R+1 taps as blocks of three (t[x] = p[x-1] + p[x] + p[x+1]) and the
+  // remaining one or two: half the additions of a plain sum.
+  constexpr int kTaps = 2 * R + 1, kBlocks = kTaps / 3, kRest = kTaps % 3;
+  for (int x = 1; x < w - 1; ++x) t[x] = p[x - 1] + p[x] + p[x + 1];
   for (int x = 0; x < R && x < w; ++x) h[x] = 0.0f;
   for (int x = R; x < w - R; ++x) {
     float sum = 0.0f;
-    for (int d = -R; d <= R; ++d) sum += p[x + d];
+    for (int k = 0; k < kBlocks; ++k) sum += t[x - R + 1 + 3 * k];
+    for (int j = 0; j < kRest; ++j) sum += p[x - R + 3 * kBlocks + j];
     h[x] = sum;
   }
   for (int x = std::max(R, w - R); x < w; ++x) h[x] = 0.0f;
 }
 
-inline void boxRow(const float* __restrict p, float* __restrict h, int w, int r) {
+inline void boxRow(const float* __restrict p, float* __restrict h, float* __restrict t, int w, int r) {
   switch (r) {
-    case 1: boxRowT<1>(p, h, w); return;
-    case 2: boxRowT<2>(p, h, w); return;
-    case 3: boxRowT<3>(p, h, w); return;
-    case 4: boxRowT<4>(p, h, w); return;
-    case 5: boxRowT<5>(p, h, w); return;
-    case 6: boxRowT<6>(p, h, w); return;
-    case 7: boxRowT<7>(p, h, w); return;
+    case 1: boxRowT<1>(p, h, t, w); return;
+    case 2: boxRowT<2>(p, h, t, w); return;
+    case 3: boxRowT<3>(p, h, t, w); return;
+    case 4: boxRowT<4>(p, h, t, w); return;
+    case 5: boxRowT<5>(p, h, t, w); return;
+    case 6: boxRowT<6>(p, h, t, w); return;
+    case 7: boxRowT<7>(p, h, t, w); return;
     default:
       for (int x = 0; x < w; ++x) h[x] = 0.0f;
       for (int d = -r; d <= r; ++d) {
@@ -144,10 +164,11 @@ inline void rowSums(const float* __restrict warped, const float* __restrict ref,
     p2[x] = a * ref[x];
     p3[x] = ok ? 1.0f : 0.0f;
   }
-  boxRow(p0, h0, w, r);
-  boxRow(p1, h1, w, r);
-  boxRow(p2, h2, w, r);
-  boxRow(p3, h3, w, r);
+  float* __restrict t = s->t3.data();
+  boxRow(p0, h0, t, w, r);
+  boxRow(p1, h1, t, w, r);
+  boxRow(p2, h2, t, w, r);
+  boxRow(p3, h3, t, w, r);
 }
 
 // out[x] = sum of rows 0 .. 2r of a (rows of w floats), the rows' count a
@@ -263,9 +284,9 @@ inline void sweepBand(const NativeLevel& L, int y0, int y1, Scratch* s) {
   auto grow = [](std::vector<float>& v, size_t n) {
     if (v.size() < n) v.resize(n);
   };
-  for (auto* v : {&s->warped, &s->p0, &s->p1, &s->p2, &s->p3, &s->p00, &s->p01, &s->p10, &s->p11, &s->ax, &s->ay})
-    grow(*v, w);
-  for (auto* v : {&s->i00, &s->dx, &s->dy, &s->inside}) {
+  for (auto* v : {&s->warped, &s->p0, &s->p1, &s->p2, &s->p3, &s->t3, &s->ax, &s->ay}) grow(*v, w);
+  if (s->quad.size() < 4 * static_cast<size_t>(w)) s->quad.resize(4 * static_cast<size_t>(w));
+  for (auto* v : {&s->i00, &s->inside}) {
     if (v->size() < static_cast<size_t>(w)) v->resize(w);
   }
   for (auto* v : {&s->h0, &s->h1, &s->h2, &s->h3}) grow(*v, static_cast<size_t>(wrows) * w);
@@ -289,7 +310,7 @@ inline void sweepBand(const NativeLevel& L, int y0, int y1, Scratch* s) {
         bool hit = false;
         if (y >= 0 && y < h) {
           const size_t ro = static_cast<size_t>(y) * w;
-          hit = warpRow(L.rx + ro, L.ry + ro, L.rz + ro, w, L.planes[p], L.cams[v], L.poses[v], L.images[v],
+          hit = warpRow(L.rx + ro, L.ry + ro, L.rz + ro, w, L.planes[p], L.cams[v], L.poses[v], L.quads[v],
                         s->warped.data(), s);
         }
         if (hit) {
@@ -381,15 +402,21 @@ inline void selectBand(const NativeLevel& L, int y0, size_t band_pix, Scratch* s
   }
 }
 
-// The whole level: bands of L.band rows shared out to the OpenMP threads.
+// The whole level: bands of about L.band rows shared out to the OpenMP
+// threads, as many bands as a multiple of the thread count so that no thread
+// waits for the last band of another.
 inline void sweepLevel(const NativeLevel& L) {
-  const int bands = (L.h + L.band - 1) / L.band;
+  const int threads = std::max(1, omp_get_max_threads());
+  int bands = (L.h + L.band - 1) / L.band;
+  bands = std::min(L.h, (bands + threads - 1) / threads * threads);
+  const int rows = (L.h + bands - 1) / bands;
+  bands = (L.h + rows - 1) / rows;
 #pragma omp parallel
   {
     Scratch s;
 #pragma omp for schedule(dynamic, 1)
     for (int b = 0; b < bands; ++b) {
-      sweepBand(L, b * L.band, std::min(L.h, (b + 1) * L.band), &s);
+      sweepBand(L, b * rows, std::min(L.h, (b + 1) * rows), &s);
     }
   }
 }

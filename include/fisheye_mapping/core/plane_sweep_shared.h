@@ -144,10 +144,11 @@ FM_FN float fm_warp_sample_ray(const FM_CAM_SPACE FM_CAM_FLOAT* cam, const FM_CA
  * pixels: sw = sum W, sww = sum W^2, swr = sum W R; mean_r, std_r of R over
  * the same window. */
 FM_FN float fm_zncc_cost(float n, float sw, float sww, float swr, float mean_r, float std_r) {
-  float mean_w = sw / n;
-  float var_w = fm_maxf(sww / n - mean_w * mean_w, 0.0f);
+  float inv_n = 1.0f / n; /* one division, hoisted out of pixel loops */
+  float mean_w = sw * inv_n;
+  float var_w = fm_maxf(sww * inv_n - mean_w * mean_w, 0.0f);
   float denom = fm_maxf(FM_SQRT(var_w) * std_r, 1e-12f);
-  float zncc = fm_clampf((swr / n - mean_w * mean_r) / denom, -1.0f, 1.0f);
+  float zncc = fm_clampf((swr * inv_n - mean_w * mean_r) / denom, -1.0f, 1.0f);
   int textured = (std_r >= FM_MIN_WINDOW_STD ? 1 : 0) & (var_w >= FM_MIN_WINDOW_STD * FM_MIN_WINDOW_STD ? 1 : 0);
   return textured ? 0.5f * (1.0f - zncc) : FM_COST_INVALID;
 }
