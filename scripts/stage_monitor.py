@@ -2,14 +2,18 @@
 """Counts what each stage of vehicle.launch puts out, until the pipeline goes idle.
 
 usage: stage_monitor.py --out SUMMARY.md [--idle S] [--timeout S] [--wait-first S]
+                        [--until-file F] [--progress S]
 
 Subscribes (as AnyMsg, nothing is deserialized) to the frame sets, depth,
 detections, masked depth, mesh and cloud topics; stops when no message arrived
 on any of them for --idle seconds (wall time) after the first one, or after
---timeout; writes a markdown table: messages per topic, output rate over the
+--timeout, or as soon as the file --until-file exists (the paced player's
+summary); every --progress seconds it prints one line of counts; writes a
+markdown table: messages per topic, output rate over the
 active span, first and last stamp. Exit status 1 when nothing arrived.
 """
 import argparse
+import os
 import sys
 import time
 
@@ -25,6 +29,7 @@ TOPICS = [
     ("/depth_masked", "mask: masked depth"),
     ("/mesh", "fusion: mesh updates"),
     ("/cloud", "fusion: cloud updates"),
+    ("/fusion_done", "fusion: depth frames finished"),
 ]
 
 
@@ -34,6 +39,8 @@ def main():
     ap.add_argument("--idle", type=float, default=20.0)
     ap.add_argument("--timeout", type=float, default=1800.0)
     ap.add_argument("--wait-first", type=float, default=120.0)
+    ap.add_argument("--until-file", default="")
+    ap.add_argument("--progress", type=float, default=0.0)
     args = ap.parse_args(rospy.myargv()[1:])
     rospy.init_node("stage_monitor", anonymous=True, disable_signals=True)
     stats = {t: {"n": 0, "first": None, "last": None} for t, _ in TOPICS}
@@ -47,9 +54,16 @@ def main():
 
     subs = [rospy.Subscriber(t, AnyMsg, cb, callback_args=t, queue_size=50) for t, _ in TOPICS]
     start = time.time()
+    last_progress = start
     while True:
         time.sleep(0.5)
         now = time.time()
+        if args.until_file and os.path.exists(args.until_file):
+            break
+        if args.progress > 0 and now - last_progress >= args.progress:
+            last_progress = now
+            print(f"[{now - start:5.0f} s] frame sets {stats['/frames']['n']}, depth {stats['/depth']['n']}, "
+                  f"masked {stats['/depth_masked']['n']}, fused {stats['/fusion_done']['n']}", flush=True)
         lasts = [s["last"] for s in stats.values() if s["last"]]
         if not lasts and now - start > args.wait_first:
             break

@@ -20,6 +20,10 @@
 //   start          seconds into the bag to begin (default 0)
 //   require_tf     the bag must hold /tf (default true: the map needs poses)
 //   summary_file   YAML with the counts, written at the end (optional)
+//   hold           after the drive, keep publishing the last pose of every
+//                  /tf frame (stamped with the last clock) until shut down,
+//                  so that a viewer started later still places the map
+//                  (default true)
 //
 // Exit status: 0 when the drive was played to its end, 1 on bad input (no bag,
 // a camera topic or /tf missing, stamps going backwards: the message names
@@ -32,6 +36,7 @@
 #include <std_msgs/Header.h>
 #include <sensor_msgs/CompressedImage.h>
 #include <sensor_msgs/Image.h>
+#include <tf2_msgs/TFMessage.h>
 
 #include <chrono>
 #include <cmath>
@@ -74,7 +79,7 @@ int main(int argc, char** argv) {
   std::string bag_path, camchain, mount, reference_topic, done_topic = "/fusion_done", summary_file;
   std::vector<std::string> image_topics;
   double timeout = 120.0, wait_subscribers = 120.0, start = 0.0;
-  bool require_tf = true;
+  bool require_tf = true, hold = true;
   pnh.getParam("bag", bag_path);
   pnh.getParam("camchain", camchain);
   pnh.getParam("mount", mount);
@@ -86,6 +91,7 @@ int main(int argc, char** argv) {
   pnh.getParam("start", start);
   pnh.getParam("require_tf", require_tf);
   pnh.getParam("summary_file", summary_file);
+  pnh.getParam("hold", hold);
   if (bag_path.empty()) {
     ROS_FATAL("paced_player: parameter ~bag (the rosbag to play) is required");
     return 2;
@@ -197,6 +203,8 @@ int main(int argc, char** argv) {
   };
   const auto t0 = std::chrono::steady_clock::now();
   int last_progress = -1;
+  std::map<std::string, geometry_msgs::TransformStamped> last_pose;  // child frame -> latest /tf
+  ros::Time last_clock;
   const double duration = (view.getEndTime() - begin).toSec();
   for (const rosbag::MessageInstance& m : play) {
     if (!ros::ok()) break;
@@ -218,7 +226,13 @@ int main(int argc, char** argv) {
     rosgraph_msgs::Clock clock;
     clock.clock = m.getTime();
     clock_pub.publish(clock);
+    last_clock = clock.clock;
     pubs[topic].publish(m);
+    if (hold && topic == "/tf") {
+      if (auto tf = m.instantiate<tf2_msgs::TFMessage>()) {
+        for (const auto& t : tf->transforms) last_pose[t.child_frame_id] = t;
+      }
+    }
     const int progress = static_cast<int>(100.0 * (m.getTime() - begin).toSec() / std::max(duration, 1e-9));
     if (progress / 10 != last_progress / 10) {
       last_progress = progress;
@@ -249,6 +263,22 @@ int main(int argc, char** argv) {
     f << "played: " << played.size() << "\nfused: " << fused << "\nskipped: " << skipped
       << "\ntimed_out: " << timed_out << "\nstopped_on_bad_input: " << (bad_input ? "true" : "false")
       << "\nwall_s: " << wall << "\n";
+  }
+  // Hold the last poses (rviz started after the drive still finds the frames).
+  if (hold && !last_pose.empty()) {
+    ROS_INFO("paced_player: holding the last pose of %zu frames until shut down", last_pose.size());
+    while (ros::ok()) {
+      tf2_msgs::TFMessage msg;
+      for (auto& [child, t] : last_pose) {
+        t.header.stamp = last_clock;
+        msg.transforms.push_back(t);
+      }
+      rosgraph_msgs::Clock clock;
+      clock.clock = last_clock;
+      clock_pub.publish(clock);
+      pubs["/tf"].publish(msg);
+      ros::WallDuration(0.5).sleep();
+    }
   }
   spinner.stop();
   return bad_input ? 1 : 0;
