@@ -7,6 +7,8 @@
 
 #include <cv_bridge/cv_bridge.h>
 #include <gtest/gtest.h>
+
+#include <set>
 #include <pcl_conversions/pcl_conversions.h>
 #include <ros/package.h>
 #include <ros/ros.h>
@@ -37,6 +39,8 @@ fm::analytic::Scene scene() {
 
 sensor_msgs::PointCloud2ConstPtr last_cloud;
 visualization_msgs::MarkerArrayConstPtr last_mesh;
+std::set<int> on_screen;    // marker ids added and not deleted, as rviz holds them
+int mesh_protocol_errors = 0;
 
 
 class TsdfFusionNode : public ::testing::Test {
@@ -51,6 +55,20 @@ class TsdfFusionNode : public ::testing::Test {
         }));
     mesh_sub_ = nh_.subscribe<visualization_msgs::MarkerArray>(
         "mesh", 20, boost::function<void(const visualization_msgs::MarkerArrayConstPtr&)>([](const auto& m) {
+          // What rviz would hold: every marker id at most once per message,
+          // a DELETE only for an id added before (else rviz warns).
+          std::set<int> in_message;
+          for (const auto& marker : m->markers) {
+            if (marker.action == visualization_msgs::Marker::DELETEALL) {
+              on_screen.clear();
+              continue;
+            }
+            if (!in_message.insert(marker.id).second) ++mesh_protocol_errors;
+            if (marker.action == visualization_msgs::Marker::DELETE && !on_screen.erase(marker.id)) {
+              ++mesh_protocol_errors;
+            }
+            if (marker.action == visualization_msgs::Marker::ADD) on_screen.insert(marker.id);
+          }
           for (const auto& marker : m->markers) {
             if (marker.action == visualization_msgs::Marker::ADD) {
               last_mesh = m;
@@ -116,6 +134,7 @@ TEST_F(TsdfFusionNode, FusesFramesAndServesTheMap) {
   EXPECT_GE(near, cloud.size() * 98 / 100);
 
   ASSERT_TRUE(last_mesh != nullptr);
+  EXPECT_EQ(mesh_protocol_errors, 0) << "mesh updates repeated a marker id or deleted one never added";
   size_t triangles = 0;
   for (const auto& m : last_mesh->markers) {
     EXPECT_EQ(m.header.frame_id, "map");

@@ -10,6 +10,8 @@
 // Parameters  see README ("TSDF fusion nodelet").
 #include <memory>
 #include <mutex>
+#include <unordered_map>
+#include <unordered_set>
 
 #include <cv_bridge/cv_bridge.h>
 #include <message_filters/subscriber.h>
@@ -193,9 +195,24 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
       del.action = visualization_msgs::Marker::DELETEALL;
       markers.markers.push_back(del);
       cleared_ = false;
+      marker_ids_.clear();
+      shown_.clear();
     }
-    for (const BlockIndex& b : changed) markers.markers.push_back(blockMarker(b, stamp));
-    mesh_pub_.publish(markers);
+    // One marker per changed block, once: ADD where it has triangles, DELETE
+    // only where an earlier ADD is on screen (rviz warns about deleting what
+    // it never got).
+    std::unordered_set<int> sent;
+    for (const BlockIndex& b : changed) {
+      visualization_msgs::Marker m = blockMarker(b, stamp);
+      if (!sent.insert(m.id).second) continue;
+      if (m.action == visualization_msgs::Marker::DELETE) {
+        if (!shown_.erase(m.id)) continue;
+      } else {
+        shown_.insert(m.id);
+      }
+      markers.markers.push_back(std::move(m));
+    }
+    if (!markers.markers.empty()) mesh_pub_.publish(markers);
     sensor_msgs::PointCloud2 cloud;
     pcl::toROSMsg(mesher_->surfaceCloud(), cloud);
     cloud.header.frame_id = world_frame_;
@@ -213,9 +230,19 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     markers.markers.push_back(del);
     const ros::Time stamp = last_stamp_.isZero() ? ros::Time::now() : last_stamp_;
     for (const auto& kv : mesher_->blocks()) {
-      if (!kv.second.triangles.empty()) markers.markers.push_back(blockMarker(kv.first, stamp));
+      if (kv.second.triangles.empty()) continue;
+      markers.markers.push_back(blockMarker(kv.first, stamp));
+      shown_.insert(markers.markers.back().id);
     }
     return markers;
+  }
+
+  // A marker id per block, handed out in order on first use: unique (a hash
+  // of the block index could collide and hide a block).
+  int markerId(const BlockIndex& b) const {
+    auto it = marker_ids_.find(b);
+    if (it == marker_ids_.end()) it = marker_ids_.emplace(b, static_cast<int>(marker_ids_.size())).first;
+    return it->second;
   }
 
   visualization_msgs::Marker blockMarker(const BlockIndex& b, const ros::Time& stamp) const {
@@ -223,7 +250,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     m.header.frame_id = world_frame_;
     m.header.stamp = stamp;
     m.ns = "tsdf_mesh";
-    m.id = static_cast<int>(BlockIndexHash()(b) & 0x7fffffff);
+    m.id = markerId(b);
     m.pose.orientation.w = 1.0;
     m.scale.x = m.scale.y = m.scale.z = 1.0;
     const auto it = mesher_->blocks().find(b);
@@ -321,6 +348,8 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
   ros::Time last_stamp_;
   size_t frames_fused_ = 0, dropped_no_tf_ = 0;
   bool cleared_ = false;
+  mutable std::unordered_map<BlockIndex, int, BlockIndexHash> marker_ids_;  // block -> marker id
+  std::unordered_set<int> shown_;  // marker ids added and not deleted since
 };
 
 }  // namespace fisheye_mapping
