@@ -4,11 +4,10 @@
 #include <sys/stat.h>
 
 #include <fstream>
+#include <set>
 
 #include <cv_bridge/cv_bridge.h>
 #include <gtest/gtest.h>
-
-#include <set>
 #include <pcl_conversions/pcl_conversions.h>
 #include <ros/package.h>
 #include <ros/ros.h>
