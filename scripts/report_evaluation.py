@@ -49,6 +49,20 @@ def machine():
     return f"{os.cpu_count()} cores ({cpu}), {platform.system()} {platform.release()}, no GPU used"
 
 
+def min_observations():
+    """The TSDF's minimum observation count the maps use: config/vehicle.yaml's
+    tsdf section, else config/tsdf_fusion.yaml."""
+    import yaml
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    for path, section in (("config/vehicle.yaml", "tsdf"), ("config/tsdf_fusion.yaml", None)):
+        with open(os.path.join(root, path)) as f:
+            doc = yaml.safe_load(f) or {}
+        doc = (doc.get(section) or {}) if section else doc
+        if "min_observations" in doc:
+            return int(doc["min_observations"])
+    return 3
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("out")
@@ -60,14 +74,15 @@ def main():
     ap.add_argument("--readme")
     a = ap.parse_args()
     o = a.out
+    minobs = min_observations()
     md = []
     md.append(f"Machine: {machine()}. Command: `scripts/evaluate --duration {a.duration:g} --every {a.every} "
               f"--frames {a.frames} --depth-frames {a.depth_frames}` ({a.elapsed / 60:.0f} min). Drives: urban and "
               f"forest road, {a.duration:g} s each at 5 Hz, 5 cameras 1024x544, 8 moving vehicles; maps from "
               f"every {a.every}. frame set, the first {a.frames} of them ({a.frames * a.every / 5:g} s of each "
-              f"drive: the CPU-only sweep takes about 3 s a frame set); the reference map is fused from the ground-truth depth of the same frame "
-              f"sets (moving vehicles masked with the true boxes); TSDF parameters of `config/vehicle.yaml` "
-              f"(voxel 0.05 m, max range 15 m, minimum 3 observations).")
+              f"drive); the reference map is fused from the ground-truth depth of the same frame "
+              f"sets (moving vehicles masked with the true boxes); sweep filters and TSDF parameters of "
+              f"`config/vehicle.yaml` (for both maps: voxel 0.05 m, max range 15 m, minimum {minobs} observations).")
     md.append("")
     # Fig. 7
     md.append("### Map accuracy and completeness (Fig. 7 analogue)")
@@ -80,7 +95,7 @@ def main():
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
     for pi, preset in enumerate(PRESETS):
         for det, name in DETECTORS:
-            for variant, label in (("cloud", "3 (filter on)"), ("cloud_all", "1 (filter off)")):
+            for variant, label in (("cloud", f"{minobs} (filter on)"), ("cloud_all", "1 (filter off)")):
                 path = os.path.join(o, preset, f"map_{det}", f"{variant}_accuracy.csv")
                 if not os.path.exists(path):
                     continue
@@ -116,8 +131,7 @@ def main():
                            f"0.25 m ({'meets' if comp >= 0.90 else 'misses'} the 90 % goal and "
                            f"{'meets' if comp > 0.80 else 'misses'} the paper's 80 %)")
     if summary:
-        md.append("Result: " + "; ".join(summary) + ". Completeness is low because the filtered sweep gives "
-                  "no depth on untextured surfaces (asphalt, plain walls) that the ground-truth depth covers.")
+        md.append("Result: " + "; ".join(summary) + ".")
         md.append("")
     md.append("![Fig. 7 analogue](fig7_accuracy_completeness.png)")
     md.append("")
@@ -125,7 +139,7 @@ def main():
     md.append("### Trails of moving vehicles (Fig. 8 analogue)")
     md.append("")
     md.append("Trail voxels: surface voxels of our map farther than 0.25 m from the drive's static scene mesh, "
-              "i.e. occupied where the static scene is empty, with the minimum-observation filter (3) and without "
+              f"i.e. occupied where the static scene is empty, with the minimum-observation filter ({minobs}) and without "
               "it (1). Depth outliers count too; the difference between the columns is what masking removes.")
     md.append("")
     md.append("| drive | min. observations | " + " | ".join(n for _, n in DETECTORS) + " |")
@@ -133,7 +147,7 @@ def main():
     fig, ax = plt.subplots(figsize=(7, 3.5))
     width = 0.25
     for pi, preset in enumerate(PRESETS):
-        for variant, label in (("cloud", "3"), ("cloud_all", "1")):
+        for variant, label in (("cloud", str(minobs)), ("cloud_all", "1")):
             vals = []
             for det, _ in DETECTORS:
                 path = os.path.join(o, preset, f"map_{det}", f"{variant}_accuracy.csv")
@@ -164,7 +178,7 @@ def main():
               + ", ".join(f"{100 * (1 - trails[(p, 'ground_truth')] / trails[(p, 'none')]):.0f} % ({p})"
                           for p in PRESETS if trails.get((p, 'none')))
               + " of the trail voxels; with it, few remain in any mode (a moving car rarely fills the same voxel "
-              "three times).")
+              + f"{minobs} times).")
     md.append("")
     md.append("![Fig. 8 analogue](fig8_trails.png)")
     md.append("")
