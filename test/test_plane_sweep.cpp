@@ -354,6 +354,29 @@ TEST_P(PlaneSweepBackends, AgreeWithTheReferenceImplementation) {
   }
 }
 
+// Best-k aggregation takes another path through the native backend (it keeps
+// every view's costs): the same comparison at half resolution.
+TEST_P(PlaneSweepBackends, AgreeWithTheReferenceForBestK) {
+  fm::PlaneSweepConfig ref = config("cpu", "half"), ours = config(GetParam(), "half");
+  ref.aggregation = ours.aggregation = "best_k";
+  const fm::DepthResult a = run(ref), b = run(ours);
+  int both = 0, close = 0, costs_close = 0;
+  for (int v = 0; v < a.raw_depth.rows; ++v) {
+    for (int u = 0; u < a.raw_depth.cols; ++u) {
+      const float da = a.raw_depth.at<float>(v, u), db = b.raw_depth.at<float>(v, u);
+      if (!std::isfinite(da) || !std::isfinite(db)) continue;
+      ++both;
+      close += std::fabs(da - db) <= 0.01f * da;
+      costs_close += std::fabs(a.cost.at<float>(v, u) - b.cost.at<float>(v, u)) <= 0.01f;
+    }
+  }
+  // Over every pixel, untextured ones included (the float sums drift there:
+  // see the test above, which looks at textured pixels only).
+  EXPECT_GT(both, 0.3 * a.raw_depth.total());
+  EXPECT_GE(close, 0.95 * both);
+  EXPECT_GE(costs_close, 0.95 * both);
+}
+
 INSTANTIATE_TEST_SUITE_P(Products, PlaneSweepBackends, ::testing::Values("opencl", "native"));
 
 TEST(PlaneSweepBackend, AutoTakesTheGpuElseTheNativeCpuBackend) {

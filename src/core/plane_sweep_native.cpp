@@ -138,8 +138,8 @@ class NativeSweepBackend : public SweepBackend {
         const float* row = im.ptr<float>(y);
         const float* below = im.ptr<float>(y + 1 < ih ? y + 1 : y);
         uint16_t* out = q.data() + 4 * static_cast<size_t>(y) * iw;
-        auto unit = [](float f) -> uint16_t {
-          return f < 0.0f ? kQuadMasked : static_cast<uint16_t>(std::lround(std::min(f, 1.0f) * kQuadScale));
+        auto unit = [](float f) -> uint16_t {  // round to nearest; no libm call
+          return f < 0.0f ? kQuadMasked : static_cast<uint16_t>(std::min(f, 1.0f) * kQuadScale + 0.5f);
         };
         for (int x = 0; x < iw; ++x) {
           const int x1 = x + 1 < iw ? x + 1 : x;

@@ -16,7 +16,9 @@ struct Scratch {
   std::vector<float> cb, lo, hi, second, t_best;  // plane selection, per band pixel
   std::vector<int> best, prev, next;
   std::vector<float> h0, h1, h2, h3;          // horizontal window sums, (band + 2r) rows
-  std::vector<float> vcost;                   // per-view costs, views x band rows
+  std::vector<float> vcost;                   // per-view costs, views x band rows (best-k)
+  std::vector<float> agg_sum;                 // mean aggregation: sums and counts per band pixel
+  std::vector<int> agg_n;
   std::vector<float> volume;                  // cost volume of the band, planes x band rows
 };
 
@@ -290,7 +292,14 @@ inline void sweepBand(const NativeLevel& L, int y0, int y1, Scratch* s) {
     if (v->size() < static_cast<size_t>(w)) v->resize(w);
   }
   for (auto* v : {&s->h0, &s->h1, &s->h2, &s->h3}) grow(*v, static_cast<size_t>(wrows) * w);
-  grow(s->vcost, band_pix * L.views);
+  // Mean aggregation (the default) sums the views' costs as they come; best-k
+  // keeps every view's costs for fm_aggregate.
+  const bool mean_mode = L.mode != FM_AGGREGATE_BEST_K;
+  grow(s->vcost, band_pix * (mean_mode ? 1 : L.views));
+  grow(s->agg_sum, band_pix);
+  if (s->agg_n.size() < band_pix) s->agg_n.resize(band_pix);
+  float* __restrict agg_sum = s->agg_sum.data();
+  int* __restrict agg_n = s->agg_n.data();
   grow(s->volume, band_pix * L.n_planes);
   Scratch tmp;  // row sums of costRow (small; separate from the warp's rows)
   tmp.p0.resize(w);
@@ -320,22 +329,40 @@ inline void sweepBand(const NativeLevel& L, int y0, int y1, Scratch* s) {
           for (int x = 0; x < w; ++x) h0[x] = h1[x] = h2[x] = h3[x] = 0.0f;
         }
       }
-      float* vc = s->vcost.data() + v * band_pix;
+      float* vc = s->vcost.data() + (mean_mode ? 0 : v * band_pix);
       if (!view_hit) {
-        for (size_t i = 0; i < band_pix; ++i) vc[i] = FM_COST_INVALID;
-        continue;
+        if (!mean_mode) {
+          for (size_t i = 0; i < band_pix; ++i) vc[i] = FM_COST_INVALID;
+        }
+        continue;  // adds nothing to a mean
+      }
+      if (mean_mode && !any) {  // the first view with costs: start the sums
+        for (size_t i = 0; i < band_pix; ++i) {
+          agg_sum[i] = 0.0f;
+          agg_n[i] = 0;
+        }
       }
       any = true;
       for (int j = 0; j < rows; ++j) {
         const size_t ro = static_cast<size_t>(y0 + j) * w;
-        costRow(*s, w, r, j, L.mean + ro, L.stdev + ro, vc + static_cast<size_t>(j) * w, &tmp);
+        float* __restrict c = vc + static_cast<size_t>(j) * w;
+        costRow(*s, w, r, j, L.mean + ro, L.stdev + ro, c, &tmp);
+        if (mean_mode) {  // fm_aggregate's mean, one view at a time
+          float* __restrict sum = agg_sum + static_cast<size_t>(j) * w;
+          int* __restrict n = agg_n + static_cast<size_t>(j) * w;
+          for (int x = 0; x < w; ++x) fm_aggregate_add(c[x], &sum[x], &n[x]);
+        }
       }
     }
     if (!any) {
       for (size_t i = 0; i < band_pix; ++i) vol[i] = FM_COST_INVALID;
       continue;
     }
-    aggregate(L.views, s->vcost.data(), band_pix, static_cast<int>(band_pix), L.mode, L.k, vol);
+    if (mean_mode) {
+      for (size_t i = 0; i < band_pix; ++i) vol[i] = fm_aggregate_mean(agg_sum[i], agg_n[i]);
+    } else {
+      aggregate(L.views, s->vcost.data(), band_pix, static_cast<int>(band_pix), L.mode, L.k, vol);
+    }
   }
 
   selectBand(L, y0, band_pix, s);

@@ -159,27 +159,36 @@ FM_FN float fm_zncc_cost(float n, float sw, float sww, float swr, float mean_r, 
  * smallest. Invalid when no view is valid. Branch-free per pixel: ranks by
  * pairwise comparison (ties broken by view index); the one branch is on the
  * mode, the same for every pixel (and folded away where it is a constant). */
+/* The mean aggregation one view at a time, for backends that produce the
+ * views' costs one after another: fm_aggregate_add each view's cost (in view
+ * order), then fm_aggregate_mean; the same result as fm_aggregate's mean. */
+FM_FN void fm_aggregate_add(float cost, float* sum, int* n) {
+  int valid = cost < FM_COST_INVALID;
+  *n += valid;
+  *sum += valid ? cost : 0.0f;
+}
+
+FM_FN float fm_aggregate_mean(float sum, int n) { return n > 0 ? sum / (float)n : FM_COST_INVALID; }
+
 FM_FN float fm_aggregate(const float* costs, int views, int mode, int k) {
   int n = 0;
   float sum_all = 0.0f;
   for (int v = 0; v < views; ++v) {
-    int valid = costs[v] < FM_COST_INVALID;
-    n += valid;
-    sum_all += valid ? costs[v] : 0.0f;
+    fm_aggregate_add(costs[v], &sum_all, &n);
   }
-  int take = (mode == FM_AGGREGATE_BEST_K && k < n) ? k : n;
-  float sum = sum_all;
-  if (mode == FM_AGGREGATE_BEST_K) {
-    float sum_best = 0.0f;
-    for (int v = 0; v < views; ++v) {
-      int rank = 0;
-      for (int w = 0; w < views; ++w) {
-        rank += (costs[w] < costs[v] || (costs[w] == costs[v] && w < v)) ? 1 : 0;
-      }
-      sum_best += (costs[v] < FM_COST_INVALID && rank < take) ? costs[v] : 0.0f;
+  if (mode != FM_AGGREGATE_BEST_K) { /* the same for every pixel */
+    return fm_aggregate_mean(sum_all, n);
+  }
+  int take = k < n ? k : n;
+  float sum_best = 0.0f;
+  for (int v = 0; v < views; ++v) {
+    int rank = 0;
+    for (int w = 0; w < views; ++w) {
+      rank += (costs[w] < costs[v] || (costs[w] == costs[v] && w < v)) ? 1 : 0;
     }
-    sum = take == n ? sum_all : sum_best;
+    sum_best += (costs[v] < FM_COST_INVALID && rank < take) ? costs[v] : 0.0f;
   }
+  float sum = take == n ? sum_all : sum_best;
   return n > 0 ? sum / (float)(take > 0 ? take : 1) : FM_COST_INVALID;
 }
 
