@@ -51,6 +51,23 @@ TEST(OfflineMapper, MapsADriveAndWritesTimings) {
   std::ifstream mesh(kDir + "/map/mesh.ply"), cloud(kDir + "/map/cloud.pcd");
   EXPECT_TRUE(mesh.good());
   EXPECT_TRUE(cloud.good());
+  const std::string full_run = out;
+
+  // One frame set into the same folder: no voxel is seen often enough for a
+  // mesh, so the earlier mesh and cloud stay, and the run does not claim them.
+  const auto size = [](const std::string& p) {
+    std::ifstream f(p, std::ios::binary | std::ios::ate);
+    return f ? static_cast<long>(f.tellg()) : -1L;
+  };
+  const long mesh_size = size(kDir + "/map/mesh.ply"), cloud_size = size(kDir + "/map/cloud.pcd");
+  out = run(std::string(FM_OFFLINE_MAPPER) + " --bag " + kDir + "/drive/drive.bag" + kRig + " --out " + kDir +
+                "/map --quiet --frames 1 --config " + FM_TEST_DATA_DIR + "/vehicle_small_rig.yaml",
+            &rc);
+  EXPECT_NE(out.find("mesh.ply not written"), std::string::npos) << out;
+  EXPECT_EQ(out.find("wrote " + kDir + "/map/mesh.ply"), std::string::npos) << out;
+  EXPECT_EQ(size(kDir + "/map/mesh.ply"), mesh_size);
+  EXPECT_EQ(size(kDir + "/map/cloud.pcd"), cloud_size);
+  EXPECT_NE(full_run.find("wrote " + kDir + "/map/mesh.ply, cloud.pcd, cloud_all.pcd"), std::string::npos) << full_run;
 
   // The same images without /tf: a clear error naming the problem.
   {
