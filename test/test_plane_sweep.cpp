@@ -303,6 +303,17 @@ class PlaneSweepScene : public ::testing::Test {
     return sweep.compute(fm::rigSweepView(*rig_, 0, 0, images_[0], ref_mask), supports, &T_base_ref);
   }
 
+  // Pixels of the reference image (downscaled by `factor`) whose window of
+  // `window` pixels has an intensity standard deviation above 0.03.
+  static cv::Mat texturedPixels(int factor, int window) {
+    cv::Mat grey, mean, sq;
+    images_[0].convertTo(grey, CV_32F, 1 / 255.0);
+    if (factor > 1) cv::resize(grey, grey, cv::Size(grey.cols / factor, grey.rows / factor), 0, 0, cv::INTER_AREA);
+    cv::boxFilter(grey, mean, CV_32F, cv::Size(window, window));
+    cv::boxFilter(grey.mul(grey), sq, CV_32F, cv::Size(window, window));
+    return (sq - mean.mul(mean)) > 0.03 * 0.03;
+  }
+
   static fm::Rig* rig_;
   static fm::synth::World* world_;
   static std::vector<cv::Mat> images_;
@@ -325,11 +336,7 @@ TEST_P(PlaneSweepBackends, AgreeWithTheReferenceImplementation) {
     ASSERT_EQ(cpu.used_views.size(), 2u);
     // The kernels' running float sums lose precision on nearly flat windows
     // (variance ~1e-4 next to mean^2 ~0.5); compare where there is texture.
-    cv::Mat grey, mean, sq;
-    images_[0].convertTo(grey, CV_32F, 1 / 255.0);
-    cv::boxFilter(grey, mean, CV_32F, cv::Size(9, 9));
-    cv::boxFilter(grey.mul(grey), sq, CV_32F, cv::Size(9, 9));
-    const cv::Mat textured = (sq - mean.mul(mean)) > 0.03 * 0.03;
+    const cv::Mat textured = texturedPixels(1, 9);
     int both = 0, one = 0, close = 0;
     for (int v = 0; v < cpu.raw_depth.rows; ++v) {
       for (int u = 0; u < cpu.raw_depth.cols; ++u) {
@@ -361,12 +368,7 @@ TEST_P(PlaneSweepBackends, AgreeWithTheReferenceForBestK) {
   fm::PlaneSweepConfig ref = config("cpu", "half"), ours = config(GetParam(), "half");
   ref.aggregation = ours.aggregation = "best_k";
   const fm::DepthResult a = run(ref), b = run(ours);
-  cv::Mat grey, half, mean, sq;
-  images_[0].convertTo(grey, CV_32F, 1 / 255.0);
-  cv::resize(grey, half, cv::Size(grey.cols / 2, grey.rows / 2), 0, 0, cv::INTER_AREA);
-  cv::boxFilter(half, mean, CV_32F, cv::Size(7, 7));
-  cv::boxFilter(half.mul(half), sq, CV_32F, cv::Size(7, 7));
-  const cv::Mat textured = (sq - mean.mul(mean)) > 0.03 * 0.03;
+  const cv::Mat textured = texturedPixels(2, 7);
   int both = 0, close = 0, costs_close = 0;
   for (int v = 0; v < a.raw_depth.rows; ++v) {
     for (int u = 0; u < a.raw_depth.cols; ++u) {
