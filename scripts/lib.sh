@@ -37,13 +37,20 @@ fm_build() {
   mkdir -p "$FM_WS/src"
   ln -sfn "$FM_ROOT" "$FM_WS/src/fisheye_mapping"
   fm_log "building ($variant) in $FM_WS"
+  # One build at a time per workspace (two shells building the same checkout
+  # would corrupt each other's outputs); the lock is released on return.
+  local lock rc=0
+  exec {lock}>"$FM_WS/.build_$variant.lock"
+  flock "$lock"
   # ROS's setup scripts read unset variables.
   set +u
   catkin_make -C "$FM_WS" --build "$FM_WS/build_$variant" \
     -DCATKIN_DEVEL_PREFIX="$FM_WS/devel_$variant" \
     -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-    -DFM_SANITIZE="$sanitize" -DCATKIN_ENABLE_TESTING=ON -j2 "${@:2}"
+    -DFM_SANITIZE="$sanitize" -DCATKIN_ENABLE_TESTING=ON -j2 "${@:2}" || rc=$?
   set -u
+  exec {lock}>&-
+  return "$rc"
 }
 
 # fm_source VARIANT: sources the devel space so rosrun/roslaunch find the package.
