@@ -14,7 +14,16 @@
 //     Motion stereo on the V-Charge fisheye sequence (PlaneSweepLib's test
 //     data): frames 0-4 of one camera, frame 2 as reference. Writes our depth
 //     (TIFF + colour PNG) and DIR/vcharge_<camera>_compare.png: reference
-//     image | PlaneSweepLib's result | ours, for a visual check.
+//     image | PlaneSweepLib's result | ours, for a visual check. Then checks
+//     without ground truth: frame 3 (supported by 1, 2, 4, 5) against frame 2
+//     moved with the poses (share of pixels whose ranges agree within 5 %) and
+//     the flatness of the road beside the car in frame 2 (share of points
+//     within 5 cm of a robustly fitted plane; --ground-z: the nominal ground
+//     in the system frame that places the road region). One line per run and
+//     DIR/vcharge_<camera>_check.csv (filtered and raw depth).
+//
+//   depth_eval vcharge-check --data DIR --camera left|right --depth-k F --depth-k1 F --out DIR [--k K]
+//     The same checks on saved depth TIFFs of frames K (default 2) and K+1.
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -29,6 +38,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "fisheye_mapping/core/depth_consistency.h"
 #include "fisheye_mapping/core/depth_image.h"
 #include "fisheye_mapping/core/plane_sweep.h"
 #include "fisheye_mapping/core/rig.h"
@@ -43,7 +53,10 @@ namespace {
             << "usage: depth_eval synthetic --camchain F --mount F --out DIR [--preset urban|forest] [--seed N]\n"
             << "                  [--frames N] [--start S] [--step S] [--backend auto|native|opencl|cpu] [--device D]\n"
             << "                  [--max-range M]\n"
-            << "       depth_eval vcharge --data DIR --camera left|right --out DIR [--device D]\n";
+            << "       depth_eval vcharge --data DIR --camera left|right --out DIR [--device D] [--ground-z Z]\n"
+            << "                  [--label TEXT]\n"
+            << "       depth_eval vcharge-check --data DIR --camera left|right --depth-k F --depth-k1 F --out DIR\n"
+            << "                  [--k K] [--ground-z Z] [--label TEXT]\n";
   std::exit(2);
 }
 
@@ -251,28 +264,137 @@ Eigen::Isometry3d systemPose(const std::string& poses_path, long long time_us) {
   throw std::runtime_error(poses_path + ": no pose at time " + std::to_string(time_us) + " us");
 }
 
-int runVcharge(const std::map<std::string, std::string>& a) {
-  const std::string data = get(a, "data"), camera = get(a, "camera"), out = get(a, "out");
+// The first `count` frames of one V-Charge camera with their camera-to-world
+// poses; the rig holds the camera (base frame = the system frame).
+struct VchargeSequence {
+  fm::Rig rig;
+  std::vector<std::string> names;
+  std::vector<cv::Mat> images;  // empty unless loaded
+  std::vector<Eigen::Isometry3d> T_W_C;
+};
+
+VchargeSequence loadVcharge(const std::string& data, const std::string& camera, size_t count, bool load_images) {
   const std::string dir = data + "/" + camera;
-  std::filesystem::create_directories(out);
   std::ifstream list(dir + "/images.txt");
   if (!list) throw std::runtime_error(dir + "/images.txt: cannot read");
-  std::vector<std::string> names;
-  for (std::string n; std::getline(list, n) && names.size() < 5;) {
-    if (!n.empty()) names.push_back(n);
+  VchargeSequence s;
+  for (std::string n; std::getline(list, n) && s.names.size() < count;) {
+    if (!n.empty()) s.names.push_back(n);
   }
-  if (names.size() < 5) throw std::runtime_error(dir + "/images.txt: fewer than 5 images");
-  std::vector<cv::Mat> images;
-  std::vector<Eigen::Isometry3d> T_W_C;
-  fm::Rig rig;
-  for (const auto& n : names) {
+  if (s.names.size() < count) {
+    throw std::runtime_error(dir + "/images.txt: fewer than " + std::to_string(count) + " images");
+  }
+  for (const auto& n : s.names) {
     cv::Mat im = cv::imread(dir + "/" + n, cv::IMREAD_UNCHANGED);
     if (im.empty()) throw std::runtime_error(dir + "/" + n + ": cannot read image");
-    if (rig.cameras.empty()) rig = fm::loadPslCalibration(dir + "/calib.txt", im.cols, im.rows, camera);
+    if (s.rig.cameras.empty()) s.rig = fm::loadPslCalibration(dir + "/calib.txt", im.cols, im.rows, camera);
     const long long t = std::stoll(n.substr(n.find_last_of('_') + 1));
-    T_W_C.push_back(systemPose(dir + "/system_poses.txt", t) * rig.cameras[0].T_base_cam);
-    images.push_back(im);
+    s.T_W_C.push_back(systemPose(dir + "/system_poses.txt", t) * s.rig.cameras[0].T_base_cam);
+    if (load_images) s.images.push_back(im);
   }
+  return s;
+}
+
+// Real-data checks without ground truth (depth_consistency.h): depth of frame
+// k against frame k+1 moved into frame k with the poses, and the flatness of
+// the road beside the car in frame k.
+//
+// Road region: pixels whose ray meets the nominal ground inside a box of the
+// camera's ground frame (cameraGroundFrame: x = the camera's viewing direction
+// on the ground; the V-Charge cameras look sideways and down, so this is the
+// road beside the car): 0.5-3 m from the camera's foot point, +-2 m across.
+// Nominal ground: z = kVchargeGroundZ in the system frame, measured on this
+// data: the road plane fitted in this region lies 0.84 m (right) and 0.88 m
+// (left) below the system origin, tilted < 1 degree (PlaneSweep at commit
+// a77d9cc, filtered depth of frame 2). The system origin is near camera
+// height, not on the ground.
+constexpr double kVchargeGroundZ = -0.85;
+const fm::GroundBox kVchargeRoadBox{0.5, 3.0, -2.0, 2.0};
+
+struct VchargeCheck {
+  fm::FrameConsistency consistency;
+  fm::RoadFlatness flatness;
+  cv::Mat road;              // the road region (CV_8UC1)
+  size_t road_pixels = 0;    // pixels of the road region
+  double ground_z = 0.0;     // fitted plane's height at the system origin (system frame)
+  double ground_tilt_deg = 0.0;  // its normal against the system frame's z
+};
+
+VchargeCheck checkVcharge(const VchargeSequence& s, int k, const cv::Mat& depth_k, const cv::Mat& depth_k1,
+                          double ground_z) {
+  const fm::RigCamera& cam = s.rig.cameras[0];
+  VchargeCheck c;
+  c.consistency = fm::frameConsistency(depth_k, cam.model, depth_k1, cam.model, s.T_W_C[k].inverse() * s.T_W_C[k + 1]);
+  const cv::Mat road = fm::groundRegionMask(cam.model, fm::cameraGroundFrame(cam.T_base_cam, ground_z), kVchargeRoadBox);
+  c.road = road;
+  c.road_pixels = static_cast<size_t>(cv::countNonZero(road));
+  c.flatness = fm::roadPlaneFlatness(depth_k, cam.model, road);
+  if (c.flatness.normal.norm() > 0) {
+    // The plane in the system frame: n_s . p + d_s = 0, normal up.
+    Eigen::Vector3d n = cam.T_base_cam.linear() * c.flatness.normal;
+    double d = c.flatness.d - n.dot(cam.T_base_cam.translation());
+    if (n.z() < 0) n = -n, d = -d;
+    c.ground_z = -d / n.z();
+    c.ground_tilt_deg = std::acos(std::min(1.0, n.z())) * 180.0 / M_PI;
+  }
+  return c;
+}
+
+// The image with the road region tinted: green within 5 cm of the fitted
+// plane, red off it, blue without depth.
+cv::Mat roadOverlay(const cv::Mat& image, const cv::Mat& depth, const fm::CameraModel& camera, const VchargeCheck& c) {
+  cv::Mat out;
+  cv::cvtColor(image, out, image.channels() == 1 ? cv::COLOR_GRAY2BGR : cv::COLOR_BGRA2BGR);
+  const std::vector<Eigen::Vector3f> rays = fm::pixelRays(camera);
+  for (int v = 0; v < out.rows; ++v) {
+    for (int u = 0; u < out.cols; ++u) {
+      if (!c.road.at<uint8_t>(v, u)) continue;
+      const float r = depth.at<float>(v, u);
+      const Eigen::Vector3f& ray = rays[static_cast<size_t>(v) * out.cols + u];
+      cv::Vec3b tint(255, 0, 0);
+      if (std::isfinite(r) && r > 0 && ray.allFinite()) {
+        const double dist = std::abs(c.flatness.normal.dot(r * ray.cast<double>()) + c.flatness.d);
+        tint = dist <= 0.05 ? cv::Vec3b(0, 255, 0) : cv::Vec3b(0, 0, 255);
+      }
+      cv::Vec3b& px = out.at<cv::Vec3b>(v, u);
+      for (int ch = 0; ch < 3; ++ch) px[ch] = static_cast<uint8_t>(px[ch] / 2 + tint[ch] / 2);
+    }
+  }
+  return out;
+}
+
+void reportVcharge(const std::string& out, const std::string& camera, const std::string& label, int k,
+                   const std::vector<std::pair<std::string, VchargeCheck>>& checks) {
+  const std::string path = out + "/vcharge_" + camera + "_check.csv";
+  std::ofstream csv(path);
+  csv << "camera,code,frames,depth,consistency_share,consistency_compared,consistency_median_rel_diff,"
+      << "flatness_share,flatness_points,road_pixels,flatness_median_dist_m,ground_z_m,ground_tilt_deg\n";
+  for (const auto& [which, c] : checks) {
+    csv << camera << ",\"" << label << "\"," << k << "/" << k + 1 << "," << which << "," << c.consistency.share << ","
+        << c.consistency.compared << "," << c.consistency.median_rel_diff << "," << c.flatness.share << ","
+        << c.flatness.points << "," << c.road_pixels << "," << c.flatness.median_abs_dist << "," << c.ground_z << ","
+        << c.ground_tilt_deg << "\n";
+  }
+  const VchargeCheck& c = checks.front().second;
+  std::cout << std::fixed << std::setprecision(1) << "vcharge " << camera << " check (" << label << ", frames " << k
+            << "/" << k + 1 << ", " << checks.front().first << "): consistency " << 100 * c.consistency.share
+            << " % of " << c.consistency.compared << " px within 5 % (median " << 100 * c.consistency.median_rel_diff
+            << " %); road flatness " << 100 * c.flatness.share << " % of " << c.flatness.points << " px within 5 cm ("
+            << 100.0 * c.flatness.points / std::max<size_t>(1, c.road_pixels) << " % of the road region valid), ground "
+            << std::setprecision(2) << c.ground_z << " m, tilt " << std::setprecision(1) << c.ground_tilt_deg
+            << " deg\nwrote " << path << "\n";
+}
+
+int runVcharge(const std::map<std::string, std::string>& a) {
+  const std::string data = get(a, "data"), camera = get(a, "camera"), out = get(a, "out");
+  const double ground_z = std::stod(get(a, "ground-z", std::to_string(kVchargeGroundZ)));
+  std::filesystem::create_directories(out);
+  // Frames 0-5: reference k = 2 with 0, 1, 3, 4 (the visual comparison) and
+  // k + 1 = 3 with 1, 2, 4, 5 (the consistency check).
+  const VchargeSequence s = loadVcharge(data, camera, 6, true);
+  const std::vector<std::string>& names = s.names;
+  const std::vector<cv::Mat>& images = s.images;
+  const fm::Rig& rig = s.rig;
   fm::PlaneSweepConfig config;
   config.device = get(a, "device", "-");
   if (config.device == "-") config.device.clear();
@@ -282,15 +404,20 @@ int runVcharge(const std::map<std::string, std::string>& a) {
   config.min_parallax_px = 0.0;  // ~0.2 m between frames: small but all we have
   config.aggregation = "best_k";  // frames before and after: one of them sees occluded points
   fm::PlaneSweep sweep(config);
+  auto depthAt = [&](int ref) {
+    fm::SweepView rv{names[ref], rig.cameras[0].model, Eigen::Isometry3d::Identity(), images[ref], cv::Mat()};
+    std::vector<fm::SweepView> supports;
+    for (int i = ref - 2; i <= ref + 2; ++i) {
+      if (i == ref) continue;
+      supports.push_back({names[i], rig.cameras[0].model, s.T_W_C[ref].inverse() * s.T_W_C[i], images[i], cv::Mat()});
+    }
+    return sweep.compute(rv, supports, nullptr);
+  };
   const int ref = 2;
-  fm::SweepView rv{names[ref], rig.cameras[0].model, Eigen::Isometry3d::Identity(), images[ref], cv::Mat()};
-  std::vector<fm::SweepView> supports;
-  for (int i = 0; i < 5; ++i) {
-    if (i == ref) continue;
-    supports.push_back({names[i], rig.cameras[0].model, T_W_C[ref].inverse() * T_W_C[i], images[i], cv::Mat()});
-  }
-  const fm::DepthResult r = sweep.compute(rv, supports, nullptr);
+  const fm::DepthResult r = depthAt(ref);
+  const fm::DepthResult r1 = depthAt(ref + 1);
   fm::writeDepthTiff(out + "/vcharge_" + camera + "_depth.tiff", r.depth);
+  fm::writeDepthTiff(out + "/vcharge_" + camera + "_depth_k1.tiff", r1.depth);
   const cv::Mat ours = fm::colorizeDepth(r.depth, config.near, config.far);
   const cv::Mat ours_raw = fm::colorizeDepth(r.raw_depth, config.near, config.far);
   cv::imwrite(out + "/vcharge_" + camera + "_depth.png", ours);
@@ -317,9 +444,42 @@ int runVcharge(const std::map<std::string, std::string>& a) {
   std::cout << "vcharge " << camera << ": reference " << names[ref] << ", " << r.used_views.size()
             << " supporting frames, " << std::fixed << std::setprecision(1) << r.total_ms << " ms, "
             << cv::countNonZero(r.depth == r.depth) << " valid pixels after filtering ("
-            << cv::countNonZero(r.raw_depth == r.raw_depth) << " before)\n"
+            << cv::countNonZero(r.raw_depth == r.raw_depth) << " before); frame " << ref + 1 << ": "
+            << r1.used_views.size() << " supporting frames, " << r1.total_ms << " ms\n"
             << "wrote " << out << "/vcharge_" << camera << "_compare.png (reference | PlaneSweepLib BestK | ours "
             << "unfiltered | ours filtered)\n";
+  const VchargeCheck filtered = checkVcharge(s, ref, r.depth, r1.depth, ground_z);
+  const VchargeCheck raw = checkVcharge(s, ref, r.raw_depth, r1.raw_depth, ground_z);
+  reportVcharge(out, camera, get(a, "label", "this build"), ref, {{"filtered", filtered}, {"raw", raw}});
+  // Road region of frame 2: filtered | raw depth.
+  cv::Mat road;
+  cv::hconcat(roadOverlay(images[ref], r.depth, rig.cameras[0].model, filtered),
+              roadOverlay(images[ref], r.raw_depth, rig.cameras[0].model, raw), road);
+  cv::resize(road, road, cv::Size(), 0.5, 0.5, cv::INTER_AREA);
+  cv::imwrite(out + "/vcharge_" + camera + "_road.png", road);
+  return 0;
+}
+
+// The same checks on saved depth TIFFs of frames k and k + 1 (e.g. written by
+// another build of depth_eval vcharge).
+int runVchargeCheck(const std::map<std::string, std::string>& a) {
+  const std::string data = get(a, "data"), camera = get(a, "camera"), out = get(a, "out");
+  const int k = std::stoi(get(a, "k", "2"));
+  const double ground_z = std::stod(get(a, "ground-z", std::to_string(kVchargeGroundZ)));
+  if (k < 0) usage("--k must be >= 0");
+  std::filesystem::create_directories(out);
+  const VchargeSequence s = loadVcharge(data, camera, k + 2, true);
+  auto read = [](const std::string& path) {
+    cv::Mat d = cv::imread(path, cv::IMREAD_UNCHANGED);
+    if (d.type() != CV_32FC1) throw std::runtime_error(path + ": not a 32-bit float depth TIFF");
+    return d;
+  };
+  const cv::Mat depth_k = read(get(a, "depth-k"));
+  const VchargeCheck c = checkVcharge(s, k, depth_k, read(get(a, "depth-k1")), ground_z);
+  reportVcharge(out, camera, get(a, "label", "saved depth"), k, {{"saved", c}});
+  cv::Mat road = roadOverlay(s.images[k], depth_k, s.rig.cameras[0].model, c);
+  cv::resize(road, road, cv::Size(), 0.5, 0.5, cv::INTER_AREA);
+  cv::imwrite(out + "/vcharge_" + camera + "_road.png", road);
   return 0;
 }
 
@@ -332,6 +492,7 @@ int main(int argc, char** argv) {
   try {
     if (mode == "synthetic") return runSynthetic(a);
     if (mode == "vcharge") return runVcharge(a);
+    if (mode == "vcharge-check") return runVchargeCheck(a);
     usage("unknown mode '" + mode + "'");
   } catch (const std::exception& e) {
     std::cerr << "depth_eval: " << e.what() << "\n";
