@@ -239,13 +239,14 @@ std::map<std::string, std::map<std::string, double>> checkRows(const std::string
   return rows;
 }
 
-// Measured on 2024-11-29 (depth_eval vcharge, frames 2/3, PlaneSweep as of
-// a77d9cc = fff858f, and the same with the sweep edits then in progress):
-//              consistency (5 %)   road flatness (5 cm)   road valid   ground z
-//   left   filtered 0.930 of 419-431k px   0.991 of 129k px   60 %   -0.92 m
-//          raw      0.798 of 710k px       0.963 of 215k px  100 %   -0.94 m
-//   right  filtered 0.880-0.883 of 381-406k 0.994 of 99k px   45 %   -0.83 m
-//          raw      0.751 of 697k px       0.947 of 217k px  100 %   -0.81 m
+// Measured with depth_eval vcharge (frames 2/3, 2 cores), two code states of
+// the sweep: A = a77d9cc (the sweep of fff858f), B = the working tree of
+// 2024-11-29 11:06 with sweep edits then in progress:
+//                   consistency (5 %)          road flatness (5 cm)  road valid  ground z
+//   left  filtered  A 0.930 / B 0.930 of 431k / 419k px  0.991 of 130k px   60 %   -0.93 m
+//         raw       A 0.779 / B 0.798 of 759k / 710k px  0.962-0.963        100 %  -0.92 m
+//   right filtered  A 0.883 / B 0.880 of 406k / 381k px  0.994 of 99k px    46 %   -0.81 m
+//         raw       A 0.722 / B 0.751 of 771k / 697k px  0.946-0.947        100 %  -0.80 m
 // The bounds sit clearly below these, so that a broken sweep or pose
 // convention fails while tuning the filters does not.
 TEST(VchargeDepth, ConsistentAndFlatRoad) {

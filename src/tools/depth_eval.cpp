@@ -10,17 +10,20 @@
 //     Writes DIR/depth_frames.csv (one row per frame and configuration),
 //     DIR/depth_summary.md and colour-coded PNGs of the first frame.
 //
-//   depth_eval vcharge --data DIR --camera left|right --out DIR
+//   depth_eval vcharge --data DIR --camera left|right --out DIR [--ground-z Z] [--label TEXT]
 //     Motion stereo on the V-Charge fisheye sequence (PlaneSweepLib's test
 //     data): frames 0-4 of one camera, frame 2 as reference. Writes our depth
-//     (TIFF + colour PNG) and DIR/vcharge_<camera>_compare.png: reference
-//     image | PlaneSweepLib's result | ours, for a visual check. Then checks
+//     (TIFF + colour PNG; frame 3's as _depth_k1.tiff) and
+//     DIR/vcharge_<camera>_compare.png: reference image | PlaneSweepLib's
+//     result | ours, for a visual check. Then checks
 //     without ground truth: frame 3 (supported by 1, 2, 4, 5) against frame 2
 //     moved with the poses (share of pixels whose ranges agree within 5 %) and
 //     the flatness of the road beside the car in frame 2 (share of points
 //     within 5 cm of a robustly fitted plane; --ground-z: the nominal ground
-//     in the system frame that places the road region). One line per run and
-//     DIR/vcharge_<camera>_check.csv (filtered and raw depth).
+//     in the system frame that places the road region). One line per run,
+//     DIR/vcharge_<camera>_check.csv (filtered and raw depth; --label goes
+//     into its "code" column) and DIR/vcharge_<camera>_road.png (the road
+//     region: green on the plane, red off it, blue without depth).
 //
 //   depth_eval vcharge-check --data DIR --camera left|right --depth-k F --depth-k1 F --out DIR [--k K]
 //     The same checks on saved depth TIFFs of frames K (default 2) and K+1.
