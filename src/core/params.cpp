@@ -25,6 +25,9 @@ PlaneSweepConfig planeSweepConfigFrom(const ParamSource& p) {
   p.get("backend", c.backend);
   p.get("device", c.device);
   DepthFilterConfig& f = c.filters;
+  p.get("filter_texture", f.texture);
+  p.get("min_texture_snr", f.min_texture_snr);
+  p.get("min_noise_std", f.min_noise_std);
   p.get("filter_cost", f.cost);
   p.get("alpha_upper", f.alpha_upper);
   p.get("alpha_lower", f.alpha_lower);

@@ -10,6 +10,7 @@
 #include <stdexcept>
 
 #include <opencv2/imgproc.hpp>
+#include <opencv2/imgcodecs.hpp>
 
 namespace fisheye_mapping {
 namespace {
@@ -81,9 +82,21 @@ void windowStats(const cv::Mat& img, int radius, cv::Mat* mean, cv::Mat* stddev)
   cv::sqrt(*stddev, *stddev);
 }
 
+// 255 where a ray table (3 floats per pixel, zero = masked / invalid) has a ray.
+cv::Mat raysValid(const std::vector<float>& rays, int width, int height) {
+  cv::Mat valid(height, width, CV_8UC1);
+  for (int i = 0; i < width * height; ++i) {
+    const float* ray = rays.data() + 3 * i;
+    valid.data[i] = (ray[0] != 0.0f || ray[1] != 0.0f || ray[2] != 0.0f) ? 255 : 0;
+  }
+  return valid;
+}
+
 }  // namespace
 
 void DepthFilterConfig::validate() const {
+  require(std::isfinite(min_texture_snr) && min_texture_snr >= 0, "filters.min_texture_snr", "must be >= 0");
+  require(std::isfinite(min_noise_std) && min_noise_std > 0, "filters.min_noise_std", "must be positive");
   require(alpha_upper >= 0 && alpha_upper <= 1, "filters.alpha_upper", "must be in [0, 1]");
   require(alpha_lower >= 0 && alpha_lower <= 1, "filters.alpha_lower", "must be in [0, 1]");
   require(split_row >= 0 && split_row <= 1, "filters.split_row", "must be in [0, 1]");
@@ -180,17 +193,84 @@ cv::Mat toSweepImage(const cv::Mat& image, const std::string& what) {
   return grey;
 }
 
+double estimateNoiseStd(const cv::Mat& image, const cv::Mat& valid) {
+  CV_Assert(image.type() == CV_32FC1 && (valid.empty() || (valid.type() == CV_8UC1 && valid.size() == image.size())));
+  // Immerkaer (1996): N = [1 -2 1; -2 4 -2; 1 -2 1] has zero response to
+  // planar intensity; on white noise of std s its response has std 6 s, and
+  // a normal variable's median absolute value is 0.6745 std.
+  std::vector<float> r;
+  r.reserve(static_cast<size_t>(image.rows) * image.cols / 2);
+  for (int v = 1; v + 1 < image.rows; ++v) {
+    const float* a = image.ptr<float>(v - 1);
+    const float* b = image.ptr<float>(v);
+    const float* c = image.ptr<float>(v + 1);
+    const uint8_t* ma = valid.empty() ? nullptr : valid.ptr<uint8_t>(v - 1);
+    const uint8_t* mb = valid.empty() ? nullptr : valid.ptr<uint8_t>(v);
+    const uint8_t* mc = valid.empty() ? nullptr : valid.ptr<uint8_t>(v + 1);
+    for (int u = 1; u + 1 < image.cols; ++u) {
+      if (ma && !(ma[u - 1] && ma[u] && ma[u + 1] && mb[u - 1] && mb[u] && mb[u + 1] && mc[u - 1] && mc[u] && mc[u + 1])) {
+        continue;
+      }
+      const float n = a[u - 1] - 2 * a[u] + a[u + 1] - 2 * (b[u - 1] - 2 * b[u] + b[u + 1]) + c[u - 1] - 2 * c[u] + c[u + 1];
+      r.push_back(std::fabs(n));
+    }
+  }
+  if (r.empty()) return 0.0;
+  // The lower quartile: texture and edges add to the upper part of the
+  // distribution. |N(0, 1)|'s quartile is 0.3186.
+  std::nth_element(r.begin(), r.begin() + r.size() / 4, r.end());
+  return r[r.size() / 4] / (0.3186 * 6.0);
+}
+
+cv::Mat texturelessRegions(const cv::Mat& image, const cv::Mat& valid, double min_snr, double min_noise_std) {
+  CV_Assert(image.type() == CV_32FC1 && valid.type() == CV_8UC1 && valid.size() == image.size());
+  const double noise = std::max(estimateNoiseStd(image, valid), min_noise_std);
+  cv::Mat mean, sq, var;
+  cv::boxFilter(image, mean, CV_32F, cv::Size(3, 3), cv::Point(-1, -1), true, cv::BORDER_REPLICATE);
+  cv::boxFilter(image.mul(image), sq, CV_32F, cv::Size(3, 3), cv::Point(-1, -1), true, cv::BORDER_REPLICATE);
+  var = sq - mean.mul(mean);
+  const double floor = min_snr * noise;
+  cv::Mat flat = (var < floor * floor) & (valid != 0);
+  cv::Mat labels, stats, centroids;
+  const int n = cv::connectedComponentsWithStats(flat, labels, stats, centroids, 4, CV_32S);
+  // Regions reaching the top edge of the valid image (sky and what touches
+  // it), each at least 0.2 % of the valid pixels.
+  std::vector<uint8_t> top(n, 0);
+  for (int v = 0; v < image.rows; ++v) {
+    const int* l = labels.ptr<int>(v);
+    const uint8_t* above = v > 0 ? valid.ptr<uint8_t>(v - 1) : nullptr;
+    for (int u = 0; u < image.cols; ++u) {
+      if (l[u] > 0 && (!above || !above[u])) top[l[u]] = 1;
+    }
+  }
+  const int min_area = std::max(1, static_cast<int>(0.002 * cv::countNonZero(valid)));
+  std::vector<uint8_t> big(n, 0);
+  for (int i = 1; i < n; ++i) big[i] = (top[i] && stats.at<int>(i, cv::CC_STAT_AREA) >= min_area) ? 255 : 0;
+  cv::Mat region(image.size(), CV_8UC1);
+  for (int v = 0; v < image.rows; ++v) {
+    const int* l = labels.ptr<int>(v);
+    uint8_t* r = region.ptr<uint8_t>(v);
+    for (int u = 0; u < image.cols; ++u) r[u] = big[l[u]];
+  }
+  cv::dilate(region, region, cv::Mat::ones(5, 5, CV_8UC1));
+  return region;
+}
+
 cv::Mat applyDepthFilters(const DepthFilterConfig& config, const cv::Mat& raw, const cv::Mat& cost,
-                          const cv::Mat& ratio) {
+                          const cv::Mat& ratio, const cv::Mat& texture) {
   cv::Mat depth = raw.clone();
   const int w = raw.cols, h = raw.rows;
   const int split = static_cast<int>(std::lround(config.split_row * h));
+  const bool use_texture = config.texture && !texture.empty();
+  const float min_snr = static_cast<float>(config.min_texture_snr);
   for (int v = 0; v < h; ++v) {
     float* d = depth.ptr<float>(v);
     const float* c = cost.ptr<float>(v);
     const float* q = ratio.ptr<float>(v);
+    const float* t = use_texture ? texture.ptr<float>(v) : nullptr;
     const float alpha = static_cast<float>(v < split ? config.alpha_upper : config.alpha_lower);
     for (int u = 0; u < w; ++u) {
+      if (t && !(t[u] >= min_snr)) d[u] = NAN;
       if (config.cost && !(c[u] <= alpha)) d[u] = NAN;
       if (config.uniqueness && !(q[u] <= config.max_ratio)) d[u] = NAN;
     }
@@ -354,7 +434,7 @@ DepthResult PlaneSweep::compute(const SweepView& ref, const std::vector<SweepVie
       mask_full.push_back(checkedMask(supports[i]));
     }
     // One scale: slot 0 full view, 1 half view, 2 full-resolution crop.
-    auto run = [&](int slot, cv::Mat* range, cv::Mat* cost, cv::Mat* ratio) {
+    auto run = [&](int slot, cv::Mat* range, cv::Mat* cost, cv::Mat* ratio, cv::Mat* texture) {
       SweepLevel level;
       level.id = slot;
       CameraModel cam = ref.camera;
@@ -382,6 +462,12 @@ DepthResult PlaneSweep::compute(const SweepView& ref, const std::vector<SweepVie
       level.ref = ref_img;
       level.radius = (half ? config_.window_half : config_.window_full) / 2;
       windowStats(ref_img, level.radius, &level.ref_mean, &level.ref_std);
+      // Texture against this scale's own noise (averaging to half resolution
+      // halves it), over the pixels with a ray that is not masked.
+      const cv::Mat valid = raysValid(*level.rays, level.width, level.height);
+      const double noise = std::max(estimateNoiseStd(ref_img, valid), config_.filters.min_noise_std);
+      level.ref_std.convertTo(*texture, CV_32F, 1.0 / noise);
+      texture->setTo(NAN, valid == 0);
       for (size_t k = 0; k < used.size(); ++k) {
         const SweepView& s = supports[used[k]];
         const Eigen::Isometry3d T_view_ref = s.T_ref_view.inverse();
@@ -404,16 +490,17 @@ DepthResult PlaneSweep::compute(const SweepView& ref, const std::vector<SweepVie
       backend_->sweep(level, planes, config_, range, cost, ratio);
       return cam;
     };
-    cv::Mat range, cost, ratio;
+    cv::Mat range, cost, ratio, texture;
     if (config_.resolution == "full") {
-      run(0, &result.raw_depth, &result.cost, &result.uniqueness);
+      run(0, &result.raw_depth, &result.cost, &result.uniqueness, &result.texture);
     } else {
-      run(1, &range, &cost, &ratio);
+      run(1, &range, &cost, &ratio, &texture);
       result.raw_depth = upsampleNearest(range, W, H);
       result.cost = upsampleNearest(cost, W, H);
       result.uniqueness = upsampleNearest(ratio, W, H);
+      result.texture = upsampleNearest(texture, W, H);
       if (config_.resolution == "multiscale") {
-        const CameraModel crop = run(2, &range, &cost, &ratio);
+        const CameraModel crop = run(2, &range, &cost, &ratio, &texture);
         const int x0 = static_cast<int>(std::lround(ref.camera.params().cx - crop.params().cx));
         const int y0 = static_cast<int>(std::lround(ref.camera.params().cy - crop.params().cy));
         for (int v = 0; v < range.rows; ++v) {
@@ -423,14 +510,32 @@ DepthResult PlaneSweep::compute(const SweepView& ref, const std::vector<SweepVie
             result.raw_depth.at<float>(y0 + v, x0 + u) = d;
             result.cost.at<float>(y0 + v, x0 + u) = cost.at<float>(v, u);
             result.uniqueness.at<float>(y0 + v, x0 + u) = ratio.at<float>(v, u);
+            result.texture.at<float>(y0 + v, x0 + u) = texture.at<float>(v, u);
           }
         }
       }
     }
+    // Textureless regions (sky, blank walls): a window that reaches across
+    // their edge matches the edge, so the whole region goes, grown by 2 px.
+    unsigned full_version = 0;
+    const std::vector<float>& full_rays = raysFor(0, ref.camera, ref_mask, &full_version);
+    const cv::Mat region = texturelessRegions(ref_full, raysValid(full_rays, W, H), config_.filters.min_texture_snr,
+                                              config_.filters.min_noise_std);
+    result.texture.setTo(0.0f, region);
+    // The depth range is a range along the ray, like the output.
+    const float near = static_cast<float>(config_.near), far = static_cast<float>(config_.far);
+    for (int v = 0; v < H; ++v) {
+      float* d = result.raw_depth.ptr<float>(v);
+      for (int u = 0; u < W; ++u) {
+        if (!(d[u] >= near && d[u] <= far)) d[u] = NAN;
+      }
+    }
+  } else {
+    result.texture = cv::Mat(H, W, CV_32FC1, cv::Scalar(NAN));
   }
   result.sweep_ms = msSince(t0);
   const auto t1 = std::chrono::steady_clock::now();
-  result.depth = applyDepthFilters(config_.filters, result.raw_depth, result.cost, result.uniqueness);
+  result.depth = applyDepthFilters(config_.filters, result.raw_depth, result.cost, result.uniqueness, result.texture);
   // Masked reference pixels never carry a depth (half resolution could leak).
   result.depth.setTo(NAN, ref_mask != 0);
   result.raw_depth.setTo(NAN, ref_mask != 0);

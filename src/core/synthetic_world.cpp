@@ -4,6 +4,8 @@
 #include <pcl/conversions.h>
 #include <pcl/io/ply_io.h>
 
+#include <opencv2/imgproc.hpp>
+
 #include <algorithm>
 #include <cmath>
 #include <random>
@@ -84,6 +86,65 @@ void WorldConfig::validate() const {
   if (!(route_length > 0) || !std::isfinite(route_length)) throw std::invalid_argument("route_length must be positive");
   if (!(speed > 0) || !std::isfinite(speed)) throw std::invalid_argument("speed must be positive");
   if (moving_vehicles < 0) throw std::invalid_argument("moving_vehicles must be >= 0");
+  if (!(asphalt_grain >= 0 && asphalt_grain <= 1)) throw std::invalid_argument("asphalt_grain must be in [0, 1]");
+  if (!(clouds >= 0 && clouds <= 1)) throw std::invalid_argument("clouds must be in [0, 1]");
+}
+
+void SensorModel::validate() const {
+  auto check = [](bool ok, const char* what) {
+    if (!ok) throw std::invalid_argument(what);
+  };
+  check(std::isfinite(gain) && gain > 0, "sensor gain must be positive");
+  check(std::isfinite(offset) && std::abs(offset) < 255, "sensor offset must lie in (-255, 255) DN");
+  check(std::isfinite(gamma) && gamma > 0, "sensor gamma must be positive");
+  check(vignetting >= 0 && vignetting < 2.0 / 3.0, "sensor vignetting must lie in [0, 2/3)");
+  check(blur_px >= 0 && blur_px <= 10, "sensor blur_px must lie in [0, 10]");
+  check(read_noise >= 0 && read_noise <= 50, "sensor read_noise must lie in [0, 50] DN");
+  check(shot_noise >= 0 && shot_noise <= 10, "sensor shot_noise must lie in [0, 10]");
+}
+
+std::vector<SensorModel> drawSensors(const SensorSpread& spread, int cameras, uint64_t seed) {
+  std::vector<SensorModel> out;
+  for (int i = 0; i < cameras; ++i) {
+    std::mt19937_64 rng(seed * 0x9E3779B97F4A7C15ull + 7919u * static_cast<uint64_t>(i) + 1);
+    std::uniform_real_distribution<double> U(-1.0, 1.0);
+    SensorModel m = spread.base;
+    m.gain *= 1.0 + spread.gain * U(rng);
+    m.offset += spread.offset * U(rng);
+    m.gamma *= 1.0 + spread.gamma * U(rng);
+    m.validate();
+    out.push_back(m);
+  }
+  return out;
+}
+
+std::vector<ExtrinsicError> drawExtrinsicErrors(int cameras, double rot_sigma_deg, double trans_sigma_mm,
+                                                uint64_t seed) {
+  if (!(rot_sigma_deg >= 0) || !(trans_sigma_mm >= 0)) throw std::invalid_argument("calibration error sigmas must be >= 0");
+  std::vector<ExtrinsicError> out(std::max(cameras, 0));
+  for (int i = 1; i < cameras; ++i) {
+    std::mt19937_64 rng(seed * 0xD1B54A32D192ED03ull + 104729u * static_cast<uint64_t>(i) + 3);
+    std::normal_distribution<double> N(0.0, 1.0);
+    for (int a = 0; a < 3; ++a) out[i].rotation_deg[a] = rot_sigma_deg * N(rng);
+    for (int a = 0; a < 3; ++a) out[i].translation_mm[a] = trans_sigma_mm * N(rng);
+  }
+  return out;
+}
+
+Rig perturbRig(const Rig& truth, const std::vector<ExtrinsicError>& errors) {
+  if (errors.size() != truth.cameras.size()) throw std::invalid_argument("one calibration error per camera needed");
+  Rig rig = truth;
+  if (rig.cameras.empty()) return rig;
+  const Eigen::Isometry3d T_base_cam0 = truth.cameras[0].T_base_cam * truth.cameras[0].T_cam0_cam.inverse();
+  for (size_t i = 0; i < rig.cameras.size(); ++i) {
+    const Eigen::Vector3d w = errors[i].rotation_deg * (M_PI / 180.0);
+    Eigen::Isometry3d dT = Eigen::Isometry3d::Identity();
+    if (w.norm() > 0) dT.linear() = Eigen::AngleAxisd(w.norm(), w.normalized()).toRotationMatrix();
+    dT.translation() = errors[i].translation_mm * 1e-3;
+    rig.cameras[i].T_cam0_cam = truth.cameras[i].T_cam0_cam * dT;
+    rig.cameras[i].T_base_cam = T_base_cam0 * rig.cameras[i].T_cam0_cam;
+  }
+  return rig;
 }
 
 World::World(const WorldConfig& config) : config_(config) {
@@ -385,6 +446,10 @@ float World::shade(const Hit& h, const Eigen::Vector3d& p) const {
       const bool crossing = dx < kRoadHalfWidth && dy < kRoadHalfWidth;
       if (dist < kRoadHalfWidth) {
         albedo = 0.28f + 0.16f * fbm(p * 9.0, seed) + 0.05f * noise(p * 40.0, seed + 5);
+        if (config_.asphalt_grain > 0) {  // grain: 2.5 cm and 1.1 cm value noise
+          albedo += static_cast<float>(config_.asphalt_grain) *
+                    (0.6f * noise(p * 40.0, seed + 14) + 0.4f * noise(p * 90.0, seed + 15) - 0.5f);
+        }
         const bool centre = dist < 0.08;
         const bool lane_line = std::abs(dist - kLane) < 0.075 && std::fmod(std::abs(along), 6.0) < 3.0;
         const bool edge_line = dist > 2 * kLane - 0.05 && dist < 2 * kLane + 0.1;
@@ -435,11 +500,16 @@ float World::shade(const Hit& h, const Eigen::Vector3d& p) const {
 }
 
 World::Frame World::render(const CameraModel& camera, const std::vector<Eigen::Vector3f>& rays,
-                           const Eigen::Isometry3d& T_W_C, double time, uint64_t noise_seed) const {
+                           const Eigen::Isometry3d& T_W_C, double time, uint64_t noise_seed,
+                           const SensorModel& sensor) const {
   const int w = camera.width(), h = camera.height();
   if (rays.size() != static_cast<size_t>(w) * h) throw std::invalid_argument("ray table does not match the camera");
+  sensor.validate();
   Frame f;
   f.image.create(h, w, CV_8UC1);
+  cv::Mat radiance(h, w, CV_32FC1);  // after vignetting, before the sensor
+  const float vignetting = static_cast<float>(sensor.vignetting);
+  const float vignetting_floor = 1.0f - 1.5f * vignetting;
   f.depth.create(h, w, CV_32FC1);
   f.ids.create(h, w, CV_16SC1);
   const Eigen::Vector3d o = T_W_C.translation();
@@ -447,9 +517,7 @@ World::Frame World::render(const CameraModel& camera, const std::vector<Eigen::V
   const std::vector<Eigen::Isometry3d> vehicles = vehiclePoses(time);
 #pragma omp parallel for schedule(dynamic, 4)
   for (int v = 0; v < h; ++v) {
-    std::mt19937_64 rng(noise_seed * 1000003ull + static_cast<uint64_t>(v));
-    std::normal_distribution<float> gauss(0.0f, 1.5f);
-    uint8_t* img = f.image.ptr<uint8_t>(v);
+    float* img = radiance.ptr<float>(v);
     float* dep = f.depth.ptr<float>(v);
     int16_t* ids = f.ids.ptr<int16_t>(v);
     for (int u = 0; u < w; ++u) {
@@ -465,13 +533,36 @@ World::Frame World::render(const CameraModel& camera, const std::vector<Eigen::V
           dep[u] = static_cast<float>(hit.t);
           ids[u] = static_cast<int16_t>(hit.object);
         } else {
-          intensity = 0.88f + 0.06f * static_cast<float>(std::max(0.0, d.z()));  // textureless sky
+          intensity = 0.88f + 0.06f * static_cast<float>(std::max(0.0, d.z()));  // plain sky
+          if (config_.clouds > 0) {  // clouds: a texture on the directions, at infinity
+            const uint32_t seed = config_.seed * 31u + 17u;
+            intensity += static_cast<float>(config_.clouds) * (fbm(d * 3.0, seed) - 0.5f);
+          }
         }
         // Vignetting: darker towards the edge of the field of view.
         const float off_axis = std::acos(std::clamp(rc.z(), -1.0f, 1.0f)) / static_cast<float>(M_PI_2);
-        intensity *= std::max(0.55f, 1.0f - 0.3f * off_axis * off_axis);
+        intensity *= std::max(vignetting_floor, 1.0f - vignetting * off_axis * off_axis);
       }
-      img[u] = static_cast<uint8_t>(std::clamp(255.0f * intensity + gauss(rng), 0.0f, 255.0f));
+      img[u] = intensity;
+    }
+  }
+  if (sensor.blur_px > 0) cv::GaussianBlur(radiance, radiance, cv::Size(), sensor.blur_px, sensor.blur_px, cv::BORDER_REPLICATE);
+  const bool linear = sensor.gain == 1.0 && sensor.gamma == 1.0;
+  const float gain = static_cast<float>(sensor.gain), gamma = static_cast<float>(sensor.gamma);
+  const float offset = static_cast<float>(sensor.offset), shot = static_cast<float>(sensor.shot_noise);
+#pragma omp parallel for schedule(static)
+  for (int v = 0; v < h; ++v) {
+    std::mt19937_64 rng(noise_seed * 1000003ull + static_cast<uint64_t>(v));
+    std::normal_distribution<float> gauss(0.0f, 1.0f);
+    const float* in = radiance.ptr<float>(v);
+    uint8_t* img = f.image.ptr<uint8_t>(v);
+    for (int u = 0; u < w; ++u) {
+      float dn = linear ? 255.0f * in[u] : 255.0f * std::pow(std::clamp(gain * in[u], 0.0f, 1.0f), gamma);
+      dn += offset;
+      const float sigma = shot > 0 ? std::sqrt(static_cast<float>(sensor.read_noise * sensor.read_noise) +
+                                               shot * std::max(dn, 0.0f))
+                                   : static_cast<float>(sensor.read_noise);
+      img[u] = static_cast<uint8_t>(std::clamp(dn + sigma * gauss(rng), 0.0f, 255.0f));
     }
   }
   return f;

@@ -83,6 +83,8 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
 
   void onReconfigure(PlaneSweepFiltersConfig& c) {
     DepthFilterConfig f;
+    f.texture = c.filter_texture;
+    f.min_texture_snr = c.min_texture_snr;
     f.cost = c.filter_cost;
     f.alpha_upper = c.alpha_upper;
     f.alpha_lower = c.alpha_lower;
@@ -95,6 +97,7 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
     f.gamma = c.gamma;
     f.delta = c.delta;
     std::lock_guard<std::mutex> lock(mutex_);
+    f.min_noise_std = sweep_->config().filters.min_noise_std;  // not reconfigurable
     try {
       sweep_->setFilters(f);
     } catch (const std::exception& e) {

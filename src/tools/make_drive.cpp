@@ -5,16 +5,19 @@
 //
 // Writes DIR/drive.bag, DIR/camchain.yaml + DIR/mount.yaml (the rig, as read
 // back by the calibration loader) and DIR/static_scene.ply (the static world).
+// Options make a drive as hard as a real rig's (calibration error, camera
+// response differences, noise, blur, fine texture): see the usage text.
 // Bag topics: /camN/image_raw (mono8), /camN/depth_gt (32FC1 range along the
 // ray, NaN for sky; reference camera only unless --gt-depth all),
 // /cam0/detections_gt (fisheye_mapping/Detection2DArray: moving vehicles in
 // the reference camera, stamped with the image), /tf (map -> base_link at
-// 100 Hz), /tf_static (base_link -> camera frames).
+// 100 Hz), /tf_static (base_link -> camera frames, from camchain.yaml).
 #include <unistd.h>
 
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <iostream>
 #include <random>
 #include <string>
@@ -44,13 +47,36 @@ const char* kUsage =
     "  --jitter-ms MS              per-camera stamp jitter, uniform +-MS (default 0)\n"
     "  --drop P                    probability of dropping a camera image (default 0)\n"
     "  --pose-noise M              std. dev. of GNSS/INS position noise in metres (default 0)\n"
-    "  --gt-depth ref|all|none     ground-truth depth topics (default ref)\n";
+    "  --gt-depth ref|all|none     ground-truth depth topics (default ref)\n"
+    "Real rigs (all off by default: an exact drive):\n"
+    "  --calib-rot-deg S           calibration error: rotation of each supporting camera,\n"
+    "                              normal per axis with std. dev. S degrees\n"
+    "  --calib-trans-mm S          ... and translation, std. dev. S mm\n"
+    "  --gain-spread F             per-camera gain uniform in 1 +- F\n"
+    "  --offset-spread DN          per-camera black level uniform in +- DN\n"
+    "  --gamma-spread F            per-camera gamma uniform in 1 +- F\n"
+    "  --vignetting V              brightness falls by V at 90 deg off axis (default 0.3)\n"
+    "  --read-noise DN             read noise std. dev. (default 1.5)\n"
+    "  --shot-noise K              shot noise: variance K per DN of signal (default 0)\n"
+    "  --blur PX                   optical blur, Gaussian sigma in pixels (default 0)\n"
+    "  --asphalt-grain A           pixel-scale grain of the asphalt, albedo amplitude (default 0)\n"
+    "  --clouds A                  low-contrast clouds, intensity amplitude (default 0)\n"
+    "  --realistic                 all of the above as on a real rig: --calib-rot-deg 0.3\n"
+    "                              --calib-trans-mm 5 --gain-spread 0.2 --offset-spread 4\n"
+    "                              --gamma-spread 0.1 --vignetting 0.45 --read-noise 2\n"
+    "                              --shot-noise 0.03 --blur 0.7 --asphalt-grain 0.08 --clouds 0.06\n"
+    "                              (flags after it override single values)\n"
+    "With a calibration error, DIR/camchain.yaml is the perturbed calibration (what\n"
+    "the pipeline is given), DIR/camchain_true.yaml the one rendered with, and\n"
+    "DIR/calibration_error.yaml each camera's error.\n";
 
 struct Options {
   std::string out, camchain, mount, preset = "urban", gt_depth = "ref";
   uint32_t seed = 1;
   double duration = 20, rate = 10, speed = 8, jitter_ms = 0, drop = 0, pose_noise = 0;
   int moving = 6;
+  double calib_rot_deg = 0, calib_trans_mm = 0, grain = 0, clouds = 0;
+  fm::synth::SensorSpread sensors;
 };
 
 [[noreturn]] void usageError(const std::string& what) {
@@ -73,6 +99,20 @@ Options parse(int argc, char** argv) {
       std::cout << kUsage;
       std::exit(0);
     }
+    if (a == "--realistic") {
+      o.calib_rot_deg = 0.3;
+      o.calib_trans_mm = 5;
+      o.sensors.gain = 0.2;
+      o.sensors.offset = 4;
+      o.sensors.gamma = 0.1;
+      o.sensors.base.vignetting = 0.45;
+      o.sensors.base.read_noise = 2;
+      o.sensors.base.shot_noise = 0.03;
+      o.sensors.base.blur_px = 0.7;
+      o.grain = 0.08;
+      o.clouds = 0.06;
+      continue;
+    }
     if (i + 1 >= argc) usageError(a + " needs a value");
     const std::string v = argv[++i];
     if (a == "--out") o.out = v;
@@ -88,6 +128,17 @@ Options parse(int argc, char** argv) {
     else if (a == "--jitter-ms") o.jitter_ms = number(a, v);
     else if (a == "--drop") o.drop = number(a, v);
     else if (a == "--pose-noise") o.pose_noise = number(a, v);
+    else if (a == "--calib-rot-deg") o.calib_rot_deg = number(a, v);
+    else if (a == "--calib-trans-mm") o.calib_trans_mm = number(a, v);
+    else if (a == "--gain-spread") o.sensors.gain = number(a, v);
+    else if (a == "--offset-spread") o.sensors.offset = number(a, v);
+    else if (a == "--gamma-spread") o.sensors.gamma = number(a, v);
+    else if (a == "--vignetting") o.sensors.base.vignetting = number(a, v);
+    else if (a == "--read-noise") o.sensors.base.read_noise = number(a, v);
+    else if (a == "--shot-noise") o.sensors.base.shot_noise = number(a, v);
+    else if (a == "--blur") o.sensors.base.blur_px = number(a, v);
+    else if (a == "--asphalt-grain") o.grain = number(a, v);
+    else if (a == "--clouds") o.clouds = number(a, v);
     else usageError("unknown option '" + a + "'");
   }
   if (o.out.empty() || o.camchain.empty() || o.mount.empty()) usageError("--out, --camchain and --mount are required");
@@ -98,6 +149,18 @@ Options parse(int argc, char** argv) {
   if (o.pose_noise < 0) usageError("--pose-noise must be >= 0");
   if (o.moving < 0) usageError("--moving must be >= 0");
   if (o.gt_depth != "ref" && o.gt_depth != "all" && o.gt_depth != "none") usageError("--gt-depth must be ref, all or none");
+  if (o.calib_rot_deg < 0 || o.calib_rot_deg > 10) usageError("--calib-rot-deg must lie in [0, 10]");
+  if (o.calib_trans_mm < 0 || o.calib_trans_mm > 500) usageError("--calib-trans-mm must lie in [0, 500]");
+  if (o.sensors.gain < 0 || o.sensors.gain >= 1) usageError("--gain-spread must lie in [0, 1)");
+  if (o.sensors.offset < 0 || o.sensors.offset > 100) usageError("--offset-spread must lie in [0, 100]");
+  if (o.sensors.gamma < 0 || o.sensors.gamma >= 1) usageError("--gamma-spread must lie in [0, 1)");
+  try {
+    o.sensors.base.validate();
+  } catch (const std::invalid_argument& e) {
+    usageError(e.what());
+  }
+  if (o.grain < 0 || o.grain > 1) usageError("--asphalt-grain must lie in [0, 1]");
+  if (o.clouds < 0 || o.clouds > 1) usageError("--clouds must lie in [0, 1]");
   return o;
 }
 
@@ -123,10 +186,37 @@ int main(int argc, char** argv) {
     wc.speed = opt.speed;
     wc.moving_vehicles = opt.moving;
     wc.route_length = opt.speed * opt.duration + 60;
+    wc.asphalt_grain = opt.grain;
+    wc.clouds = opt.clouds;
     const fm::synth::World world(wc);
+    const int n_cams = static_cast<int>(rig.cameras.size());
+    const std::vector<fm::synth::SensorModel> sensors = fm::synth::drawSensors(opt.sensors, n_cams, opt.seed);
+    const auto calib_errors = fm::synth::drawExtrinsicErrors(n_cams, opt.calib_rot_deg, opt.calib_trans_mm, opt.seed);
+
+    // What a logged drive carries: the rig's calibration (with its error).
+    const fm::Rig given = fm::synth::perturbRig(rig, calib_errors);
 
     std::filesystem::create_directories(opt.out);
-    fm::writeKalibrRig(rig, opt.out + "/camchain.yaml", opt.out + "/mount.yaml");
+    std::filesystem::remove(opt.out + "/camchain_true.yaml");
+    std::filesystem::remove(opt.out + "/calibration_error.yaml");
+    if (opt.calib_rot_deg > 0 || opt.calib_trans_mm > 0) {
+      // The pipeline is given a calibration with the rig's error; the truth
+      // (rendered with) stays beside it for scoring.
+      fm::writeKalibrRig(given, opt.out + "/camchain.yaml", opt.out + "/mount.yaml");
+      fm::writeKalibrRig(rig, opt.out + "/camchain_true.yaml", opt.out + "/mount.yaml");
+      std::ofstream err(opt.out + "/calibration_error.yaml");
+      err << "# make_drive: camchain.yaml = camchain_true.yaml with these errors (seed " << opt.seed
+          << "): T_cam0_cam' = T_cam0_cam * (exp(rotation), translation), camera frame\n";
+      for (int c = 0; c < n_cams; ++c) {
+        const auto& e = calib_errors[c];
+        err << rig.cameras[c].name << ": {rotation_deg: [" << e.rotation_deg.x() << ", " << e.rotation_deg.y() << ", "
+            << e.rotation_deg.z() << "], translation_mm: [" << e.translation_mm.x() << ", " << e.translation_mm.y()
+            << ", " << e.translation_mm.z() << "]}\n";
+      }
+      if (!err) throw std::runtime_error("cannot write " + opt.out + "/calibration_error.yaml");
+    } else {
+      fm::writeKalibrRig(rig, opt.out + "/camchain.yaml", opt.out + "/mount.yaml");
+    }
     world.saveStaticMeshPly(opt.out + "/static_scene.ply");
 
     const std::string bag_path = opt.out + "/drive.bag";
@@ -146,7 +236,7 @@ int main(int argc, char** argv) {
 
     // Static mounts, latched like a live /tf_static.
     tf2_msgs::TFMessage statics;
-    for (const auto& cam : rig.cameras) statics.transforms.push_back(toMsg(cam.T_base_cam, rig.base_frame, cam.frame_id, t0));
+    for (const auto& cam : given.cameras) statics.transforms.push_back(toMsg(cam.T_base_cam, rig.base_frame, cam.frame_id, t0));
     auto latched = boost::make_shared<ros::M_string>();
     (*latched)["latching"] = "1";
     (*latched)["callerid"] = "/make_drive";
@@ -182,7 +272,7 @@ int main(int argc, char** argv) {
         if (opt.jitter_ms > 0) jitter = (2 * U(rng) - 1) * opt.jitter_ms * 1e-3;
         const bool drop = opt.drop > 0 && U(rng) < opt.drop;
         const auto frame = world.render(cam.model, rays[c], T_W_B * cam.T_base_cam, t + jitter,
-                                        (static_cast<uint64_t>(opt.seed) << 32) ^ (s * 64 + c));
+                                        (static_cast<uint64_t>(opt.seed) << 32) ^ (s * 64 + c), sensors[c]);
         std_msgs::Header header;
         header.stamp = stamp + ros::Duration(jitter);
         header.frame_id = cam.frame_id;

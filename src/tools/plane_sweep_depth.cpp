@@ -28,6 +28,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include "fisheye_mapping/core/depth_image.h"
+#include "fisheye_mapping/core/params.h"
 #include "fisheye_mapping/core/plane_sweep.h"
 #include "fisheye_mapping/core/rig.h"
 
@@ -51,43 +52,49 @@ std::pair<std::string, std::string> split(const std::string& kv, const std::stri
   return {kv.substr(0, eq), kv.substr(eq + 1)};
 }
 
-// Applies one parameter (the names of config/plane_sweep_depth.yaml).
-void setParam(fm::PlaneSweepConfig* c, const std::string& k, const std::string& v) {
-  auto d = [&] { return std::stod(v); };
-  auto i = [&] { return std::stoi(v); };
-  auto b = [&] { return v == "true" || v == "1"; };
-  fm::DepthFilterConfig& f = c->filters;
-  static const std::set<std::string> ignored = {"reference_camera", "support_cameras", "self_masks", "publish_uniqueness"};
-  if (ignored.count(k)) return;
-  if (k == "fronto_planes") c->fronto_planes = i();
-  else if (k == "near") c->near = d();
-  else if (k == "far") c->far = d();
-  else if (k == "ground_planes") c->ground_planes = i();
-  else if (k == "ground_min") c->ground_min = d();
-  else if (k == "ground_max") c->ground_max = d();
-  else if (k == "window_full") c->window_full = i();
-  else if (k == "window_half") c->window_half = i();
-  else if (k == "aggregation") c->aggregation = v;
-  else if (k == "best_k") c->best_k = i();
-  else if (k == "subpixel") c->subpixel = b();
-  else if (k == "resolution") c->resolution = v;
-  else if (k == "crop_width") c->crop_width = d();
-  else if (k == "crop_height") c->crop_height = d();
-  else if (k == "min_parallax_px") c->min_parallax_px = d();
-  else if (k == "min_overlap") c->min_overlap = d();
-  else if (k == "backend") c->backend = v;
-  else if (k == "device") c->device = v;
-  else if (k == "filter_cost") f.cost = b();
-  else if (k == "alpha_upper") f.alpha_upper = d();
-  else if (k == "alpha_lower") f.alpha_lower = d();
-  else if (k == "split_row") f.split_row = d();
-  else if (k == "filter_uniqueness") f.uniqueness = b();
-  else if (k == "max_ratio") f.max_ratio = d();
-  else if (k == "filter_consistency") f.consistency = b();
-  else if (k == "consistency_window") f.consistency_window = i();
-  else if (k == "gamma") f.gamma = d();
-  else if (k == "delta") f.delta = d();
-  else throw std::invalid_argument("unknown parameter '" + k + "'");
+// The parameters a config reader asked for, so that unknown names (typos)
+// are reported instead of ignored.
+class AskedParams : public fm::ParamSource {
+ public:
+  explicit AskedParams(const fm::ParamSource& inner) : inner_(inner) {}
+  bool get(const std::string& k, double& v) const override { return ask(k, v); }
+  bool get(const std::string& k, int& v) const override { return ask(k, v); }
+  bool get(const std::string& k, bool& v) const override { return ask(k, v); }
+  bool get(const std::string& k, std::string& v) const override { return ask(k, v); }
+  bool get(const std::string& k, std::vector<double>& v) const override { return ask(k, v); }
+  mutable std::set<std::string> asked{"reference_camera", "support_cameras", "self_masks", "publish_uniqueness"};
+
+ private:
+  template <class T>
+  bool ask(const std::string& k, T& v) const {
+    asked.insert(k);
+    return inner_.get(k, v);
+  }
+  const fm::ParamSource& inner_;
+};
+
+// The plane-sweep configuration of a YAML file (the names of
+// config/plane_sweep_depth.yaml) with --set overrides, read by the same core
+// function as the nodelet's.
+fm::PlaneSweepConfig readConfig(const std::string& path, const std::vector<std::pair<std::string, std::string>>& sets) {
+  YAML::Node y(YAML::NodeType::Map);
+  if (!path.empty()) {
+    try {
+      y = YAML::LoadFile(path);
+    } catch (const YAML::Exception& e) {
+      throw std::runtime_error(path + ": " + e.what());
+    }
+    if (!y.IsMap()) throw std::runtime_error(path + ": expected a map of parameters");
+  }
+  for (const auto& [k, v] : sets) y[k] = YAML::Load(v);
+  const fm::YamlParams yaml(y, path.empty() ? "--set" : path);
+  const AskedParams asked(yaml);
+  const fm::PlaneSweepConfig config = fm::planeSweepConfigFrom(asked);
+  for (const auto& kv : y) {
+    const std::string key = kv.first.as<std::string>();
+    if (!asked.asked.count(key)) throw std::invalid_argument("unknown parameter '" + key + "'");
+  }
+  return config;
 }
 
 void writeOutputs(const std::string& prefix, const fm::DepthResult& r, const fm::PlaneSweepConfig& c) {
@@ -122,20 +129,7 @@ int main(int argc, char** argv) {
     const fm::Rig rig = fm::loadKalibrRig(one["camchain"], one["mount"]);
     const std::string ref_name = one.count("reference") ? one["reference"] : "cam0";
     const int ref = rig.indexOf(rig.camera(ref_name).name);
-    fm::PlaneSweepConfig config;
-    if (one.count("config")) {
-      YAML::Node y;
-      try {
-        y = YAML::LoadFile(one["config"]);
-      } catch (const YAML::Exception& e) {
-        throw std::runtime_error(one["config"] + ": " + e.what());
-      }
-      for (const auto& kv : y) {
-        const std::string key = kv.first.as<std::string>();
-        if (kv.second.IsScalar()) setParam(&config, key, kv.second.as<std::string>());
-      }
-    }
-    for (const auto& [k, v] : sets) setParam(&config, k, v);
+    const fm::PlaneSweepConfig config = readConfig(one.count("config") ? one["config"] : "", sets);
     fm::PlaneSweep sweep(config);
     std::cerr << "plane_sweep_depth: " << sweep.backendName() << ", reference " << ref_name << "\n";
     const Eigen::Isometry3d T_base_ref = rig.cameras[ref].T_base_cam;

@@ -13,13 +13,14 @@
 // Multi-scale: the half-resolution sweep over the whole view, upsampled, with a
 // full-resolution sweep of a centre crop on top wherever the crop has a depth.
 //
-// Filters (each switchable): best cost above alpha (separate alpha for the
-// upper and lower part of the image), best / second-best cost ratio above
-// max_ratio, and local consistency (fewer than delta of the window's other
-// pixels within gamma metres of the pixel's depth).
+// Filters (each switchable): too little texture in the reference window for
+// the image's noise (sky, blank walls), best cost above alpha (separate alpha
+// for the upper and lower part of the image), best / second-best cost ratio
+// above max_ratio, and local consistency (fewer than delta of the window's
+// other pixels within gamma metres of the pixel's depth).
 //
 // Output depth: CV_32FC1, metres of Euclidean range along the pixel's ray,
-// NaN where invalid.
+// NaN where invalid; never outside [near, far] (range, like the output).
 //
 // Three backends share the warping, scoring and selection code
 // (plane_sweep_shared.h): "opencl" (any OpenCL 1.2 device: the GPU path),
@@ -45,6 +46,15 @@
 namespace fisheye_mapping {
 
 struct DepthFilterConfig {
+  // Texture: drop pixels with too little texture to correlate: the matching
+  // window's standard deviation is below min_texture_snr times the image's
+  // sensor noise (estimated per frame and scale from the image itself, at
+  // least min_noise_std), or the pixel lies in a textureless region reaching
+  // the top of the image (sky: see texturelessRegions), where windows
+  // reaching across the region's edge would match the edge.
+  bool texture = true;
+  double min_texture_snr = 1.5;
+  double min_noise_std = 1.0 / 255.0;  // image values in [0, 1]: one 8-bit step
   bool cost = true;              // drop best cost > alpha
   double alpha_upper = 0.05;     // rows above split_row * height
   double alpha_lower = 0.3;      // rows below
@@ -62,8 +72,11 @@ struct DepthFilterConfig {
 struct PlaneSweepConfig {
   // Planes.
   int fronto_planes = 64;
-  double near = 1.5;             // z-depth of the nearest fronto-parallel plane, metres
-  double far = 60.0;             // ... and of the farthest
+  // Depth range, metres of range along the ray (the output's unit): output
+  // outside [near, far] is dropped. The fronto-parallel planes span z-depths
+  // near to far, so every one meets every ray within or beyond the range.
+  double near = 1.5;
+  double far = 60.0;
   int ground_planes = 30;        // 0 disables the family
   double ground_min = -0.3;      // plane heights above the base frame's ground, metres
   double ground_max = 0.3;
@@ -109,6 +122,7 @@ struct DepthResult {
   cv::Mat raw_depth;   // the same before filtering
   cv::Mat cost;        // best cost, NaN where no plane had one
   cv::Mat uniqueness;  // best / second-best cost, NaN where none
+  cv::Mat texture;     // reference window std / sensor noise std, NaN where none
   std::vector<std::string> used_views;     // supporting views matched
   std::vector<std::string> dropped_views;  // "<name>: reason"
   double sweep_ms = 0.0;   // all scales, including transfers
@@ -124,10 +138,27 @@ std::vector<FmSweepPlane> makeSweepPlanes(const PlaneSweepConfig& config, const 
 // unsupported types.
 cv::Mat toSweepImage(const cv::Mat& image, const std::string& what);
 
-// Applies the enabled filters to raw range (NaN invalid) given the best cost
-// and ratio images; returns the filtered range.
+// Applies the enabled filters to raw range (NaN invalid) given the best cost,
+// ratio and texture images (texture may be empty: no texture filter); returns
+// the filtered range.
 cv::Mat applyDepthFilters(const DepthFilterConfig& config, const cv::Mat& raw, const cv::Mat& cost,
-                          const cv::Mat& ratio);
+                          const cv::Mat& ratio, const cv::Mat& texture = cv::Mat());
+
+// Standard deviation of an image's sensor noise (image units), robust to
+// texture: the median absolute response of Immerkaer's noise operator (the
+// difference of two Laplacians, which cancels smooth intensity) over the
+// pixels whose 3x3 neighbourhood is valid (non-zero in `valid`, CV_8UC1, or
+// every pixel when empty). Returns 0 when there are no such pixels.
+double estimateNoiseStd(const cv::Mat& image, const cv::Mat& valid = cv::Mat());
+
+// Textureless regions of a grey float image that reach the top edge of its
+// valid area (the sky, and blank walls that touch it): connected
+// (4-neighbour) areas of valid pixels whose 3x3 standard deviation is below
+// min_snr times the image's noise (estimateNoiseStd, at least min_noise_std),
+// each at least 0.2 % of the valid pixels, grown by 2 pixels. CV_8UC1, 255
+// inside. (Textured surfaces such as a road can be flat at 3x3 too, hence
+// only regions reaching the top.)
+cv::Mat texturelessRegions(const cv::Mat& image, const cv::Mat& valid, double min_snr, double min_noise_std);
 
 // Which supporting views are worth matching (see PlaneSweepConfig). Returns
 // their indices; *reasons gets "<name>: why" for the dropped ones.

@@ -4,8 +4,11 @@
 // an ego route with rounded turns, and moving vehicles (oncoming and
 // overtaking) on the ego's road. Rendering casts one ray per pixel through any
 // camera model: Lambertian shading of world-space textures, so every camera
-// sees the same surface, plus mild noise and vignetting; depth is the exact
-// range along the ray (NaN for sky). Deterministic for a seed.
+// sees the same surface, through a sensor model (by default mild noise and
+// vignetting, identical cameras; optionally per-camera gain / offset / gamma,
+// shot noise and blur, and a perturbed calibration to hand the pipeline);
+// depth is the exact range along the ray (NaN for sky). Deterministic for a
+// seed.
 //
 // Thread-safe for concurrent const calls (render from several threads).
 #ifndef FISHEYE_MAPPING_CORE_SYNTHETIC_WORLD_H_
@@ -20,6 +23,7 @@
 #include <opencv2/core.hpp>
 
 #include "fisheye_mapping/core/camera_model.h"
+#include "fisheye_mapping/core/rig.h"
 
 namespace fisheye_mapping {
 namespace synth {
@@ -44,9 +48,58 @@ struct WorldConfig {
   double route_length = 400.0;   // metres of ego route to furnish
   double speed = 8.0;            // ego speed, m/s
   int moving_vehicles = 6;       // half oncoming, half overtaking
+  // Realism (0: off). Pixel-scale grain of the asphalt (albedo amplitude of
+  // 1-2.5 cm value noise, on top of the road's blotches) and low-contrast
+  // clouds in the sky (intensity amplitude; at infinity).
+  double asphalt_grain = 0.0;
+  double clouds = 0.0;
   // Throws std::invalid_argument naming the field.
   void validate() const;
 };
+
+// One camera's sensor and lens, applied to the rendered radiance I in [0, 1]:
+//   I_v = I * max(1 - 1.5 vignetting, 1 - vignetting * (angle / 90 deg)^2)
+//   I_b = Gaussian blur of I_v (sigma blur_px)
+//   DN  = offset + 255 * clamp(gain * I_b, 0, 1)^gamma
+//       + N(0, read_noise^2 + shot_noise * DN) clamped to [0, 255]
+// The defaults are the exact drives' sensor (identical cameras, 1.5 DN noise).
+struct SensorModel {
+  double gain = 1.0;
+  double offset = 0.0;        // DN
+  double gamma = 1.0;
+  double vignetting = 0.3;
+  double blur_px = 0.0;
+  double read_noise = 1.5;    // DN
+  double shot_noise = 0.0;    // noise variance per DN of signal
+  // Throws std::invalid_argument naming the field.
+  void validate() const;
+};
+
+// Per-camera differences of a realistic rig, drawn from a seed.
+struct SensorSpread {
+  double gain = 0.0;          // gain uniform in 1 +- gain
+  double offset = 0.0;        // offset uniform in +- offset DN
+  double gamma = 0.0;         // gamma uniform in 1 +- gamma
+  SensorModel base;           // vignetting, blur and noise of every camera
+};
+// The sensors of `cameras` cameras: camera i from (seed, i) alone.
+std::vector<SensorModel> drawSensors(const SensorSpread& spread, int cameras, uint64_t seed);
+
+// A calibration error: what a rig's calibration says differs from the truth
+// by a small rigid motion of each supporting camera relative to the
+// reference (camera 0; its mount on the car stays exact).
+struct ExtrinsicError {
+  Eigen::Vector3d rotation_deg = Eigen::Vector3d::Zero();  // axis-angle, degrees
+  Eigen::Vector3d translation_mm = Eigen::Vector3d::Zero();
+};
+// Normal per-axis errors of std. dev. rot_sigma_deg and trans_sigma_mm for
+// cameras 1.., zero for camera 0; camera i from (seed, i) alone.
+std::vector<ExtrinsicError> drawExtrinsicErrors(int cameras, double rot_sigma_deg, double trans_sigma_mm,
+                                                    uint64_t seed);
+// The calibration a pipeline would be given: T_cam0_cam' = T_cam0_cam * dT,
+// dT = (exp(rotation), translation) in the camera's own frame; T_base_cam
+// follows from the unchanged T_base_cam0.
+Rig perturbRig(const Rig& truth, const std::vector<ExtrinsicError>& errors);
 
 // An axis-aligned box, or (yaw != 0 / moving) an oriented one.
 struct Box {
@@ -106,7 +159,8 @@ class World {
   // noise deterministic. Uses all cores.
   // rays: pixelRays(camera), computed once per camera.
   Frame render(const CameraModel& camera, const std::vector<Eigen::Vector3f>& rays,
-               const Eigen::Isometry3d& T_W_C, double time, uint64_t noise_seed) const;
+               const Eigen::Isometry3d& T_W_C, double time, uint64_t noise_seed,
+               const SensorModel& sensor = SensorModel()) const;
 
   // The static scene as a triangle mesh (binary PLY), for map evaluation.
   void saveStaticMeshPly(const std::string& path) const;
