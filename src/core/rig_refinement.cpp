@@ -9,6 +9,7 @@
 
 #include <opencv2/core/hal/hal.hpp>
 #include <opencv2/features2d.hpp>
+#include <opencv2/imgproc.hpp>
 #include <opencv2/video/tracking.hpp>
 
 namespace fisheye_mapping {
@@ -328,13 +329,6 @@ RigRefinementResult refineRig(const Rig& rig, int reference, const std::vector<s
                 std::to_string(cam.model.height()));
     detect_mask[c] = m == 0;
   }
-  const auto masked = [&](int c, const cv::Point2f& p) {
-    if (detect_mask[c].empty()) return false;
-    const int u = int(std::lround(p.x)), v = int(std::lround(p.y));
-    if (u < 0 || v < 0 || u >= detect_mask[c].cols || v >= detect_mask[c].rows) return true;
-    return detect_mask[c].at<uint8_t>(v, u) == 0;
-  };
-
   RigRefinementResult result;
   result.rig = rig;
   result.frame_sets = int(frame_sets.size());
@@ -353,24 +347,78 @@ RigRefinementResult refineRig(const Rig& rig, int reference, const std::vector<s
       require(T_ref[c].translation().norm() > 1e-6, rig.cameras[c].name, "has no baseline to the reference camera");
   }
 
+  // Features come from the reference image and from each support image,
+  // resampled (warp_support) into the reference camera's geometry through the
+  // calibrated rotation: patches then look alike in both, whatever the
+  // cameras' yaw, and only parallax separates them. feature_mask: where
+  // features may lie (outside self-masks, inside the resampled view).
+  const CameraModel& ref_model = rig.cameras[reference].model;
+  const auto geometry = [&](int c) -> const CameraModel& {
+    return config.warp_support ? ref_model : rig.cameras[c].model;
+  };
+  std::vector<cv::Mat> map_x(n_cams), map_y(n_cams), feature_mask = detect_mask;
+  if (config.warp_support) {
+    const std::vector<Eigen::Vector3f> rays = pixelRays(ref_model);
+    const int w = ref_model.width(), h = ref_model.height();
+    for (int c = 0; c < n_cams; ++c) {
+      if (c == reference) continue;
+      const CameraModel& model = rig.cameras[c].model;
+      const Eigen::Matrix3f R_cam_ref = T_ref[c].linear().transpose().cast<float>();
+      map_x[c].create(h, w, CV_32FC1);
+      map_y[c].create(h, w, CV_32FC1);
+      cv::Mat valid(h, w, CV_8UC1);
+      for (int v = 0; v < h; ++v) {
+        for (int u = 0; u < w; ++u) {
+          const Eigen::Vector3f& r = rays[size_t(v) * w + u];
+          Eigen::Vector2d uv;
+          const bool ok = r.allFinite() && model.project((R_cam_ref * r).cast<double>(), &uv) &&
+                          model.isInImage(uv, 1.0) &&
+                          (detect_mask[c].empty() || detect_mask[c].at<uint8_t>(int(std::lround(uv.y())),
+                                                                              int(std::lround(uv.x()))) != 0);
+          map_x[c].at<float>(v, u) = ok ? float(uv.x()) : -1.0f;
+          map_y[c].at<float>(v, u) = ok ? float(uv.y()) : -1.0f;
+          valid.at<uint8_t>(v, u) = ok ? 255 : 0;
+        }
+      }
+      // Keep ORB's and KLT's windows off the border of the resampled view.
+      cv::erode(valid, feature_mask[c], cv::getStructuringElement(cv::MORPH_RECT, cv::Size(33, 33)));
+    }
+  }
+  const auto masked = [&](int c, const cv::Point2f& p) {
+    if (feature_mask[c].empty()) return false;
+    const int u = int(std::lround(p.x)), v = int(std::lround(p.y));
+    if (u < 0 || v < 0 || u >= feature_mask[c].cols || v >= feature_mask[c].rows) return true;
+    return feature_mask[c].at<uint8_t>(v, u) == 0;
+  };
+
   // Matches per support camera, pooled over the frame sets.
   std::vector<std::vector<Match>> pooled(n_cams);
   std::vector<int> raw_matches(n_cams, 0);
   for (const auto& set : frame_sets) {
+    // The images features are taken from: each support image resampled into
+    // the reference geometry, or as recorded.
+    std::vector<cv::Mat> image(n_cams);
+    for (int c = 0; c < n_cams; ++c) {
+      if (!config.warp_support || c == reference) image[c] = set[c];
+      else cv::remap(set[c], image[c], map_x[c], map_y[c], cv::INTER_LINEAR, cv::BORDER_CONSTANT);  // new buffer
+    }
     std::vector<Features> feats(n_cams);
 #pragma omp parallel for schedule(dynamic)
     for (int c = 0; c < n_cams; ++c) {
       auto orb = cv::ORB::create(config.max_features, 1.2f, config.pyramid_levels, 31, 0, 2, cv::ORB::HARRIS_SCORE,
                                  31, 10);
-      orb->detectAndCompute(set[c], detect_mask[c].empty() ? cv::noArray() : cv::InputArray(detect_mask[c]),
+      orb->detectAndCompute(image[c], feature_mask[c].empty() ? cv::noArray() : cv::InputArray(feature_mask[c]),
                             feats[c].keypoints, feats[c].descriptors);
-      feats[c].rays = bearings(rig.cameras[c].model, feats[c].keypoints);
+      feats[c].rays = bearings(geometry(c), feats[c].keypoints);
     }
     std::vector<std::vector<Match>> found(n_cams);
 #pragma omp parallel for schedule(dynamic)
     for (int c = 0; c < n_cams; ++c) {
       if (c == reference) continue;
-      const auto dm = matchGuided(feats[reference], feats[c], T_ref[c].linear(), T_ref[c].translation().normalized(),
+      // Warped features are rays of the reference frame: R = I for the epipolar window.
+      const Eigen::Matrix3d R_match =
+          config.warp_support ? Eigen::Matrix3d::Identity() : Eigen::Matrix3d(T_ref[c].linear());
+      const auto dm = matchGuided(feats[reference], feats[c], R_match, T_ref[c].translation().normalized(),
                                   config.max_initial_residual_deg * kDeg, config.ratio, config.max_hamming);
       raw_matches[c] += int(dm.size());
       std::vector<cv::Point2f> p_ref, p_cam;
@@ -383,7 +431,8 @@ RigRefinementResult refineRig(const Rig& rig, int reference, const std::vector<s
         // The support keypoint moved to where the reference patch fits best.
         std::vector<cv::Point2f> refined = p_cam;
         std::vector<float> err;
-        cv::calcOpticalFlowPyrLK(set[reference], set[c], p_ref, refined, ok, err, cv::Size(config.klt_window, config.klt_window), 1,
+        cv::calcOpticalFlowPyrLK(image[reference], image[c], p_ref, refined, ok, err,
+                                 cv::Size(config.klt_window, config.klt_window), 1,
                                  cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 30, 0.005),
                                  cv::OPTFLOW_USE_INITIAL_FLOW);
         for (size_t i = 0; i < refined.size(); ++i) {
@@ -393,12 +442,15 @@ RigRefinementResult refineRig(const Rig& rig, int reference, const std::vector<s
       }
       const CameraModel& m_ref = rig.cameras[reference].model;
       const CameraModel& m_cam = rig.cameras[c].model;
+      const Eigen::Matrix3d R_cam_ref = T_ref[c].linear().transpose();
       for (size_t i = 0; i < p_ref.size(); ++i) {
         if (!ok[i] || masked(reference, p_ref[i]) || masked(c, p_cam[i])) continue;
         Match m;
         if (!m_ref.unproject(Eigen::Vector2d(p_ref[i].x, p_ref[i].y), &m.f_ref)) continue;
-        if (!m_cam.unproject(Eigen::Vector2d(p_cam[i].x, p_cam[i].y), &m.f_cam)) continue;
+        if (!geometry(c).unproject(Eigen::Vector2d(p_cam[i].x, p_cam[i].y), &m.f_cam)) continue;
         m.f_ref.normalize(), m.f_cam.normalize();
+        // A warped pixel's ray is the support camera's ray rotated by the calibration.
+        if (config.warp_support) m.f_cam = R_cam_ref * m.f_cam;
         if (config.weight_by_resolution) {
           // Pixel noise in both images as an angle: 1/s0^2 + 1/s1^2.
           const double s0 = pixelsPerRadian(m_ref, m.f_ref), s1 = pixelsPerRadian(m_cam, m.f_cam);

@@ -2,9 +2,14 @@
 // support camera relative to a reference camera (and optionally the direction
 // of its translation, the calibrated baseline length kept).
 //
-// Per frame set, ORB features of the reference image are matched to those of
-// each support image (mutual best match plus ratio test); keypoints become unit
-// bearing rays through the camera models (any direction, z <= 0 included).
+// Per frame set, each support image is resampled into the reference camera's
+// geometry through the calibrated rotation (patches then look alike in both
+// images whatever the cameras' yaw; only parallax and the rotation error
+// separate them). ORB features of the reference image are matched to those of
+// the resampled image within a window around their epipolar plane (mutual best
+// match, ratio test), and each match is refined to subpixel by KLT. Keypoints
+// become unit bearing rays through the camera models (any direction, z <= 0
+// included); a resampled pixel's ray is the support camera's ray, exactly.
 // Matches of all frame sets are pooled per camera. With the calibrated
 // translation t of the support camera in the reference frame, a match (f_ref,
 // f_sup) satisfies the epipolar constraint f_ref . (t x R f_sup) = 0. RANSAC
@@ -36,6 +41,7 @@ struct RigRefinementConfig {
   int pyramid_levels = 4;           // ORB scale levels (factor 1.2)
   double ratio = 0.8;               // Lowe ratio test on the two best matches
   int max_hamming = 80;             // largest descriptor distance (of 256 bits) of a match
+  bool warp_support = true;         // match against support images resampled into the reference geometry
   bool subpixel = true;             // refine support keypoints by local image alignment (KLT)
   int klt_window = 15;              // KLT window side, pixels
   bool weight_by_resolution = true;  // weight residuals by the images' pixels per radian at the rays
