@@ -19,6 +19,8 @@
 
 #include <tf2/buffer_core.h>
 #include <tf2_eigen/tf2_eigen.h>
+#include <yaml-cpp/yaml.h>
+#include <opencv2/imgproc.hpp>
 
 #include "fisheye_mapping/Detection2DArray.h"
 #include "fisheye_mapping/core/tsdf_map.h"
@@ -321,6 +323,184 @@ TEST_F(MakeDrive, BadOptionsGiveClearErrors) {
     EXPECT_NE(r.status, 0) << c.args;
     EXPECT_NE(r.output.find(c.expected), std::string::npos) << c.args << "\n" << r.output;
   }
+}
+
+// --- Realistic drives: each perturbation differs from the truth by the seeded amount.
+
+TEST(RealisticRig, ExtrinsicErrorsHaveTheSeededSpreadAndDependOnTheCameraAlone) {
+  const double rot = 0.3, trans = 5.0;
+  const auto errors = fm::synth::drawExtrinsicErrors(3001, rot, trans, 9);
+  EXPECT_EQ(errors[0].rotation_deg.norm(), 0.0);  // the reference is the frame of the others
+  EXPECT_EQ(errors[0].translation_mm.norm(), 0.0);
+  Eigen::Vector3d sr = Eigen::Vector3d::Zero(), st = Eigen::Vector3d::Zero();
+  for (size_t i = 1; i < errors.size(); ++i) {
+    sr += errors[i].rotation_deg.cwiseAbs2();
+    st += errors[i].translation_mm.cwiseAbs2();
+  }
+  const double n = static_cast<double>(errors.size() - 1);
+  for (int a = 0; a < 3; ++a) {  // sample std. dev. of 3000 normals: within 5 % of sigma
+    EXPECT_NEAR(std::sqrt(sr[a] / n), rot, 0.05 * rot);
+    EXPECT_NEAR(std::sqrt(st[a] / n), trans, 0.05 * trans);
+  }
+  // Camera i's error comes from (seed, i) alone: a smaller rig gets the same.
+  const auto few = fm::synth::drawExtrinsicErrors(3, rot, trans, 9);
+  EXPECT_EQ(few[2].rotation_deg, errors[2].rotation_deg);
+  EXPECT_NE(fm::synth::drawExtrinsicErrors(3, rot, trans, 10)[2].rotation_deg, errors[2].rotation_deg);
+}
+
+TEST(RealisticRig, PerturbedRigDiffersFromTheTruthByTheErrors) {
+  const fm::Rig truth = fm::loadKalibrRig(kData + "/small_rig_camchain.yaml", kData + "/small_rig_mount.yaml");
+  std::vector<fm::synth::ExtrinsicError> errors(truth.cameras.size());
+  ASSERT_GE(errors.size(), 2u);
+  errors[1].rotation_deg = Eigen::Vector3d(0.3, -0.4, 0.0);  // 0.5 deg about (0.6, -0.8, 0)
+  errors[1].translation_mm = Eigen::Vector3d(0.0, 3.0, 4.0);  // 5 mm
+  const fm::Rig given = fm::synth::perturbRig(truth, errors);
+  const Eigen::Isometry3d d = truth.cameras[1].T_cam0_cam.inverse() * given.cameras[1].T_cam0_cam;
+  const Eigen::AngleAxisd aa(d.linear());
+  EXPECT_NEAR(aa.angle() * 180.0 / M_PI, 0.5, 1e-9);
+  EXPECT_NEAR(aa.axis().dot(Eigen::Vector3d(0.6, -0.8, 0.0)), 1.0, 1e-9);
+  EXPECT_NEAR((d.translation() - Eigen::Vector3d(0.0, 0.003, 0.004)).norm(), 0.0, 1e-12);
+  EXPECT_TRUE(given.cameras[0].T_cam0_cam.isApprox(truth.cameras[0].T_cam0_cam, 1e-12));
+  // The mount of the reference stays; every camera's mount follows from it.
+  for (size_t i = 0; i < truth.cameras.size(); ++i) {
+    EXPECT_TRUE((given.cameras[0].T_base_cam * given.cameras[i].T_cam0_cam).isApprox(given.cameras[i].T_base_cam, 1e-12));
+  }
+  EXPECT_TRUE(given.cameras[0].T_base_cam.isApprox(truth.cameras[0].T_base_cam, 1e-12));
+}
+
+TEST_F(MakeDrive, CalibrationErrorIsWrittenBesideTheTruth) {
+  const ToolRun r = makeDrive("--out " + dir_ + "/c" + kRigArgs + " --duration 0.2 --seed 4 --calib-rot-deg 0.5 --calib-trans-mm 10");
+  ASSERT_EQ(r.status, 0) << r.output;
+  const fm::Rig given = fm::loadKalibrRig(dir_ + "/c/camchain.yaml", dir_ + "/c/mount.yaml");
+  const fm::Rig truth = fm::loadKalibrRig(dir_ + "/c/camchain_true.yaml", dir_ + "/c/mount.yaml");
+  const auto errors = fm::synth::drawExtrinsicErrors(static_cast<int>(truth.cameras.size()), 0.5, 10.0, 4);
+  const YAML::Node listed = YAML::LoadFile(dir_ + "/c/calibration_error.yaml");
+  for (size_t i = 1; i < truth.cameras.size(); ++i) {
+    const Eigen::Isometry3d d = truth.cameras[i].T_cam0_cam.inverse() * given.cameras[i].T_cam0_cam;
+    const double angle = Eigen::AngleAxisd(d.linear()).angle() * 180.0 / M_PI;
+    EXPECT_NEAR(angle, errors[i].rotation_deg.norm(), 1e-5) << truth.cameras[i].name;  // YAML keeps ~1e-9
+    EXPECT_NEAR((d.translation() * 1e3 - errors[i].translation_mm).norm(), 0.0, 1e-4) << truth.cameras[i].name;
+    const auto rot = listed[truth.cameras[i].name]["rotation_deg"].as<std::vector<double>>();
+    for (int a = 0; a < 3; ++a) EXPECT_NEAR(rot[a], errors[i].rotation_deg[a], 1e-4);
+    EXPECT_GT(angle, 0.0);
+  }
+  // The bag's /tf_static is the calibration the pipeline is given.
+  rosbag::Bag bag(dir_ + "/c/drive.bag");
+  int checked = 0;
+  for (const rosbag::MessageInstance& m : rosbag::View(bag, rosbag::TopicQuery("/tf_static"))) {
+    const auto msg = m.instantiate<tf2_msgs::TFMessage>();
+    ASSERT_TRUE(msg);
+    for (const auto& t : msg->transforms) {
+      for (size_t c = 0; c < given.cameras.size(); ++c) {
+        if (given.cameras[c].frame_id != t.child_frame_id) continue;
+        EXPECT_TRUE(tf2::transformToEigen(t).isApprox(given.cameras[c].T_base_cam, 1e-6)) << t.child_frame_id;
+        ++checked;
+      }
+    }
+  }
+  EXPECT_EQ(checked, static_cast<int>(given.cameras.size()));
+  // Without a calibration error there is no truth file to confuse.
+  ASSERT_EQ(makeDrive("--out " + dir_ + "/c" + kRigArgs + " --duration 0.2").status, 0);
+  EXPECT_FALSE(std::ifstream(dir_ + "/c/camchain_true.yaml").good());
+}
+
+// The sensor model on the flat world: response, noise and blur as specified.
+class SensorModelTest : public ::testing::Test {
+ protected:
+  SensorModelTest() : world_(config()), camera_(camera()), rays_(fm::pixelRays(camera_)) {}
+  static fm::synth::WorldConfig config() {
+    fm::synth::WorldConfig c;
+    c.preset = "flat";
+    c.route_length = 60;
+    c.asphalt_grain = 0.3;
+    return c;
+  }
+  static fm::CameraModel camera() {
+    fm::Intrinsics k;
+    k.fx = k.fy = 200;
+    k.cx = 159.5;
+    k.cy = 119.5;
+    k.width = 320;
+    k.height = 240;
+    return fm::CameraModel::pinhole(k);
+  }
+  // Looking down at the ground from 1.5 m: every pixel sees asphalt, with
+  // grain at the pixel scale (7.5 mm footprint).
+  cv::Mat render(const fm::synth::SensorModel& s, uint64_t seed = 1) const {
+    Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+    T.linear() = Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()).toRotationMatrix();
+    T.translation() = Eigen::Vector3d(3, 1.5, 1.5);
+    cv::Mat img;
+    world_.render(camera_, rays_, T, 0.0, seed, s).image.convertTo(img, CV_64F);
+    return img;
+  }
+  fm::synth::World world_;
+  fm::CameraModel camera_;
+  std::vector<Eigen::Vector3f> rays_;
+};
+
+TEST_F(SensorModelTest, ResponseNoiseAndBlurAreTheSpecifiedOnes) {
+  fm::synth::SensorModel clean;
+  clean.read_noise = 0;
+  clean.vignetting = 0;
+  const cv::Mat base = render(clean);
+  const double mean = cv::mean(base)[0];
+  ASSERT_GT(mean, 20);
+  ASSERT_LT(mean, 150);
+  fm::synth::SensorModel s = clean;
+  s.gain = 1.2;
+  s.offset = 10;
+  EXPECT_NEAR(cv::mean(render(s))[0], 1.2 * mean + 10, 0.6);  // quantization: +-0.5 DN
+  s = clean;
+  s.gamma = 1.25;  // DN = 255 (I)^1.25 per pixel
+  cv::Mat expected;
+  cv::pow(base / 255.0, 1.25, expected);
+  EXPECT_NEAR(cv::mean(render(s))[0], cv::mean(expected * 255.0)[0], 0.6);
+  // Read noise: two seeds differ by sqrt(2) sigma.
+  s = clean;
+  s.read_noise = 3;
+  cv::Scalar m, sd;
+  cv::meanStdDev(render(s, 1) - render(s, 2), m, sd);
+  EXPECT_NEAR(sd[0], std::sqrt(2.0) * 3, 0.15);
+  // Shot noise: variance = read^2 + k * signal.
+  s.shot_noise = 0.5;
+  cv::meanStdDev(render(s, 1) - render(s, 2), m, sd);
+  EXPECT_NEAR(sd[0], std::sqrt(2.0 * (9 + 0.5 * mean)), 0.05 * sd[0]);
+  // Blur lowers the grain's fine detail (the Laplacian's energy).
+  s = clean;
+  s.blur_px = 1.5;
+  cv::Mat lap_sharp, lap_blur;
+  cv::Laplacian(base, lap_sharp, CV_64F);
+  cv::Laplacian(render(s), lap_blur, CV_64F);
+  ASSERT_GT(cv::norm(lap_sharp), 2000.0);  // the grain is in view
+  EXPECT_LT(cv::norm(lap_blur), 0.5 * cv::norm(lap_sharp));
+  // Vignetting: the corner darker than the centre by the model's factor.
+  s = clean;
+  s.vignetting = 0.4;
+  const cv::Mat v = render(s);
+  const double ratio = cv::mean(v(cv::Rect(0, 0, 20, 20)))[0] / cv::mean(base(cv::Rect(0, 0, 20, 20)))[0];
+  Eigen::Vector3d corner;
+  ASSERT_TRUE(camera_.unproject(Eigen::Vector2d(10, 10), &corner));
+  const double off = std::acos(corner.normalized().z()) / M_PI_2;
+  EXPECT_NEAR(ratio, 1.0 - 0.4 * off * off, 0.02);
+  // Per-camera spread: camera i from (seed, i), within the spread.
+  fm::synth::SensorSpread spread;
+  spread.gain = 0.2;
+  spread.offset = 4;
+  spread.gamma = 0.1;
+  const auto sensors = fm::synth::drawSensors(spread, 50, 3);
+  bool differ = false;
+  for (const auto& c : sensors) {
+    EXPECT_LE(std::abs(c.gain - 1.0), 0.2);
+    EXPECT_LE(std::abs(c.offset), 4.0);
+    EXPECT_LE(std::abs(c.gamma - 1.0), 0.1);
+    differ |= std::abs(c.gain - sensors[0].gain) > 0.01;
+  }
+  EXPECT_TRUE(differ);
+  EXPECT_EQ(fm::synth::drawSensors(spread, 2, 3)[1].gain, sensors[1].gain);
+  fm::synth::SensorModel bad;
+  bad.gain = -1;
+  EXPECT_THROW(render(bad), std::invalid_argument);
 }
 
 }  // namespace

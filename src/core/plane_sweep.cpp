@@ -300,13 +300,16 @@ cv::Mat applyDepthFilters(const DepthFilterConfig& config, const cv::Mat& raw, c
 
 std::vector<int> selectSupportViews(const PlaneSweepConfig& config, const CameraModel& ref,
                                     const std::vector<SweepView>& views, std::vector<std::string>* reasons) {
-  // Reference pixels on a coarse grid.
+  // Reference pixels on a coarse grid, with the angle one pixel spans there.
   std::vector<Eigen::Vector3d> rays;
+  std::vector<double> pixel_angle;
   for (int gy = 1; gy < 12; ++gy) {
     for (int gx = 1; gx < 16; ++gx) {
-      Eigen::Vector3d ray;
-      if (ref.unproject(Eigen::Vector2d(ref.width() * gx / 16.0, ref.height() * gy / 12.0), &ray) && ray.z() > 0.1) {
-        rays.push_back(ray);
+      const Eigen::Vector2d px(ref.width() * gx / 16.0, ref.height() * gy / 12.0);
+      Eigen::Vector3d ray, next;
+      if (ref.unproject(px, &ray) && ray.z() > 0.1 && ref.unproject(px + Eigen::Vector2d(1.0, 0.0), &next)) {
+        rays.push_back(ray.normalized());
+        pixel_angle.push_back(std::max(1e-9, std::acos(std::clamp(ray.normalized().dot(next.normalized()), -1.0, 1.0))));
       }
     }
   }
@@ -317,13 +320,21 @@ std::vector<int> selectSupportViews(const PlaneSweepConfig& config, const Camera
     const Eigen::Isometry3d T_view_ref = view.T_ref_view.inverse();
     std::vector<double> parallax;
     int seen = 0;
-    for (const auto& ray : rays) {
+    for (size_t k = 0; k < rays.size(); ++k) {
+      const Eigen::Vector3d& ray = rays[k];
       Eigen::Vector2d a, b, m;
       // Fronto-parallel planes: z-depth near / far / mid along the ray.
-      const bool pa = view.camera.project(T_view_ref * (ray * (config.near / ray.z())), &a) && view.camera.isInImage(a);
-      const bool pb = view.camera.project(T_view_ref * (ray * (config.far / ray.z())), &b) && view.camera.isInImage(b);
+      const Eigen::Vector3d pn = T_view_ref * (ray * (config.near / ray.z()));
+      const Eigen::Vector3d pf = T_view_ref * (ray * (config.far / ray.z()));
+      const bool pa = view.camera.project(pn, &a) && view.camera.isInImage(a);
+      const bool pb = view.camera.project(pf, &b) && view.camera.isInImage(b);
       if (view.camera.project(T_view_ref * (ray * (mid / ray.z())), &m) && view.camera.isInImage(m)) ++seen;
-      if (pa && pb) parallax.push_back((a - b).norm());
+      if (!(pa && pb)) continue;
+      // In pixels of the coarser of the two images: a view with a longer
+      // focal length (a narrow camera) has many of its own pixels of
+      // parallax where the reference's window cannot resolve it.
+      const double angle = std::acos(std::clamp(pn.normalized().dot(pf.normalized()), -1.0, 1.0));
+      parallax.push_back(std::min((a - b).norm(), angle / pixel_angle[k]));
     }
     const double overlap = rays.empty() ? 0.0 : static_cast<double>(seen) / rays.size();
     double median = 0.0;

@@ -91,8 +91,11 @@ struct PlaneSweepConfig {
   double crop_width = 572.0 / 1024.0;   // centre crop, fractions of the full image
   double crop_height = 332.0 / 544.0;
   // Supporting views: kept when the parallax between the near and far planes
-  // (median over the reference's pixels, full resolution) is at least
-  // min_parallax_px pixels per fronto-parallel plane, and at least
+  // (median over the reference's pixels, full resolution, in pixels of the
+  // coarser of the two images: a narrow camera's long focal length does not
+  // count) is at least min_parallax_px pixels per fronto-parallel plane (a
+  // baseline too short for the matching to resolve the planes adds noise and
+  // its calibration error, not depth), and at least
   // min_overlap of the reference's pixels (at the geometric mean of near and
   // far) are seen by the view.
   double min_parallax_px = 0.25;
