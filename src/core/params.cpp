@@ -21,6 +21,7 @@ PlaneSweepConfig planeSweepConfigFrom(const ParamSource& p) {
   p.get("crop_width", c.crop_width);
   p.get("crop_height", c.crop_height);
   p.get("min_parallax_px", c.min_parallax_px);
+  p.get("min_parallax_ratio", c.min_parallax_ratio);
   p.get("min_overlap", c.min_overlap);
   p.get("backend", c.backend);
   p.get("device", c.device);

@@ -124,6 +124,7 @@ void PlaneSweepConfig::validate() const {
   require(crop_width > 0 && crop_width <= 1, "crop_width", "must be in (0, 1]");
   require(crop_height > 0 && crop_height <= 1, "crop_height", "must be in (0, 1]");
   require(min_parallax_px >= 0, "min_parallax_px", "must be >= 0");
+  require(min_parallax_ratio >= 0 && min_parallax_ratio <= 1, "min_parallax_ratio", "must be in [0, 1]");
   require(min_overlap >= 0 && min_overlap <= 1, "min_overlap", "must be in [0, 1]");
   require(backend == "auto" || backend == "native" || backend == "opencl" || backend == "cpu", "backend",
           "must be 'auto', 'native', 'opencl' or 'cpu', got '" + backend + "'");
@@ -314,7 +315,7 @@ std::vector<int> selectSupportViews(const PlaneSweepConfig& config, const Camera
     }
   }
   const double mid = std::sqrt(config.near * config.far);
-  std::vector<int> keep;
+  std::vector<double> overlaps, per_plane;
   for (size_t i = 0; i < views.size(); ++i) {
     const SweepView& view = views[i];
     const Eigen::Isometry3d T_view_ref = view.T_ref_view.inverse();
@@ -342,14 +343,28 @@ std::vector<int> selectSupportViews(const PlaneSweepConfig& config, const Camera
       std::nth_element(parallax.begin(), parallax.begin() + parallax.size() / 2, parallax.end());
       median = parallax[parallax.size() / 2];
     }
-    const double per_plane = median / std::max(1, config.fronto_planes - 1);
+    overlaps.push_back(overlap);
+    per_plane.push_back(median / std::max(1, config.fronto_planes - 1));
+  }
+  // The views that overlap enough; the largest parallax among them.
+  double best = 0.0;
+  for (size_t i = 0; i < views.size(); ++i) {
+    if (overlaps[i] >= config.min_overlap) best = std::max(best, per_plane[i]);
+  }
+  std::vector<int> keep;
+  for (size_t i = 0; i < views.size(); ++i) {
     std::ostringstream why;
     why.precision(3);
-    if (overlap < config.min_overlap) {
-      why << view.name << ": overlap " << overlap << " < min_overlap " << config.min_overlap;
-    } else if (per_plane < config.min_parallax_px) {
-      why << view.name << ": parallax " << per_plane << " px per plane < min_parallax_px " << config.min_parallax_px
-          << " (baseline too small for the depth range)";
+    if (overlaps[i] < config.min_overlap) {
+      why << views[i].name << ": overlap " << overlaps[i] << " < min_overlap " << config.min_overlap;
+    } else if (per_plane[i] < config.min_parallax_px) {
+      why << views[i].name << ": parallax " << per_plane[i] << " px per plane < min_parallax_px "
+          << config.min_parallax_px << " (baseline too small for the depth range)";
+    } else if (per_plane[i] < config.min_parallax_ratio * best) {
+      why << views[i].name << ": parallax " << per_plane[i] << " px per plane < min_parallax_ratio "
+          << config.min_parallax_ratio << " x " << best
+          << " of the best view (its cost curve is too flat to sharpen the mean; it would add noise and its "
+             "calibration error)";
     } else {
       keep.push_back(static_cast<int>(i));
       continue;

@@ -95,10 +95,15 @@ struct PlaneSweepConfig {
   // coarser of the two images: a narrow camera's long focal length does not
   // count) is at least min_parallax_px pixels per fronto-parallel plane (a
   // baseline too short for the matching to resolve the planes adds noise and
-  // its calibration error, not depth), and at least
+  // its calibration error, not depth) and at least min_parallax_ratio of the
+  // largest parallax among the views (mean aggregation weighs every view
+  // alike, while a view's cost curve sharpens with the square of its
+  // parallax: one with a third of the best's adds a ninth of the best's
+  // discrimination but all of its own noise and bias), and at least
   // min_overlap of the reference's pixels (at the geometric mean of near and
   // far) are seen by the view.
   double min_parallax_px = 0.25;
+  double min_parallax_ratio = 0.33;
   double min_overlap = 0.2;
   DepthFilterConfig filters;
   // Backend.
