@@ -103,6 +103,22 @@ void SensorModel::validate() const {
   check(shot_noise >= 0 && shot_noise <= 10, "sensor shot_noise must lie in [0, 10]");
 }
 
+Realism Realism::realistic() {
+  Realism r;
+  r.calib_rot_deg = 0.3;
+  r.calib_trans_mm = 5.0;
+  r.sensors.gain = 0.2;
+  r.sensors.offset = 4.0;
+  r.sensors.gamma = 0.1;
+  r.sensors.base.vignetting = 0.45;
+  r.sensors.base.read_noise = 2.0;
+  r.sensors.base.shot_noise = 0.03;
+  r.sensors.base.blur_px = 0.7;
+  r.asphalt_grain = 0.08;
+  r.clouds = 0.06;
+  return r;
+}
+
 std::vector<SensorModel> drawSensors(const SensorSpread& spread, int cameras, uint64_t seed) {
   std::vector<SensorModel> out;
   for (int i = 0; i < cameras; ++i) {

@@ -100,17 +100,12 @@ Options parse(int argc, char** argv) {
       std::exit(0);
     }
     if (a == "--realistic") {
-      o.calib_rot_deg = 0.3;
-      o.calib_trans_mm = 5;
-      o.sensors.gain = 0.2;
-      o.sensors.offset = 4;
-      o.sensors.gamma = 0.1;
-      o.sensors.base.vignetting = 0.45;
-      o.sensors.base.read_noise = 2;
-      o.sensors.base.shot_noise = 0.03;
-      o.sensors.base.blur_px = 0.7;
-      o.grain = 0.08;
-      o.clouds = 0.06;
+      const fm::synth::Realism r = fm::synth::Realism::realistic();
+      o.calib_rot_deg = r.calib_rot_deg;
+      o.calib_trans_mm = r.calib_trans_mm;
+      o.sensors = r.sensors;
+      o.grain = r.asphalt_grain;
+      o.clouds = r.clouds;
       continue;
     }
     if (i + 1 >= argc) usageError(a + " needs a value");

@@ -85,6 +85,20 @@ struct SensorSpread {
 // The sensors of `cameras` cameras: camera i from (seed, i) alone.
 std::vector<SensorModel> drawSensors(const SensorSpread& spread, int cameras, uint64_t seed);
 
+// Everything that makes a synthetic drive as hard as a real rig's, in one
+// place for make_drive and depth_eval. Default: an exact drive.
+struct Realism {
+  double calib_rot_deg = 0.0;   // calibration error std. dev. per axis (drawExtrinsicErrors)
+  double calib_trans_mm = 0.0;
+  SensorSpread sensors;         // per-camera response, noise, blur (drawSensors)
+  double asphalt_grain = 0.0;   // WorldConfig
+  double clouds = 0.0;
+  // The "realistic" setting: 0.3 deg / 5 mm calibration error, gain +-20 %,
+  // black level +-4 DN, gamma +-10 %, vignetting 0.45, read noise 2 DN, shot
+  // noise 0.03 DN per DN, blur 0.7 px, asphalt grain 0.08, clouds 0.06.
+  static Realism realistic();
+};
+
 // A calibration error: what a rig's calibration says differs from the truth
 // by a small rigid motion of each supporting camera relative to the
 // reference (camera 0; its mount on the car stays exact).
