@@ -74,3 +74,169 @@ TEST(FrameSync, QueueBoundsOpenSetsAndBadArguments) {
   EXPECT_THROW(FrameSetSync<int>(0, SyncPolicy::Exact, 0, 1), std::invalid_argument);
   EXPECT_THROW(parseSyncPolicy("nearest"), std::invalid_argument);
 }
+
+// ---------------------------------------------------------------------------
+// Time going backwards (a bag played twice, a player restarted, a clock reset).
+
+namespace {
+constexpr std::int64_t kS = 1000000000;  // ns per second
+std::int64_t sec(double s) { return std::int64_t(s * 1e9 + 0.5); }
+
+// One frame set at `t` (cameras 0..n-1 in order); returns the sets completed.
+std::size_t feed(FrameSetSync<int>& sync, int n, double t) {
+  std::size_t sets = 0;
+  for (int c = 0; c < n; ++c) sets += sync.add(c, sec(t), c).size();
+  return sets;
+}
+}  // namespace
+
+TEST(FrameSyncTimeReset, BackwardsBeyondThresholdResetsAndNextSetsComplete) {
+  FrameSetSync<int> sync(3, SyncPolicy::Exact, 0.0, 8, 1.0);
+  for (double t : {100.0, 100.1, 100.2}) EXPECT_EQ(feed(sync, 3, t), 1u);
+  sync.add(0, sec(100.3), 0);  // an open set the reset will drop
+  // The bag starts again at 90 s: cam1 first.
+  EXPECT_TRUE(sync.add(1, sec(90.0), 1).empty());
+  EXPECT_EQ(sync.stats().time_resets, 1u);
+  ASSERT_TRUE(sync.lastTimeReset());
+  EXPECT_EQ(sync.lastTimeReset()->from_ns, sec(100.2));
+  EXPECT_EQ(sync.lastTimeReset()->to_ns, sec(90.0));
+  const std::string& why = sync.lastTimeReset()->reason;
+  EXPECT_NE(why.find("time went backwards"), std::string::npos) << why;
+  EXPECT_NE(why.find("100.200"), std::string::npos) << why;
+  EXPECT_NE(why.find("90.000"), std::string::npos) << why;
+  EXPECT_NE(why.find("camera 1"), std::string::npos) << why;
+  EXPECT_NE(why.find("1 open set(s) dropped"), std::string::npos) << why;
+  EXPECT_EQ(sync.stats().dropped_incomplete, 1u);
+  EXPECT_EQ(sync.add(0, sec(90.0), 0).size(), 0u);
+  EXPECT_EQ(sync.add(2, sec(90.0), 2).size(), 1u);  // the first set of the second play
+  for (double t : {90.1, 90.2, 90.3}) EXPECT_EQ(feed(sync, 3, t), 1u);
+  EXPECT_EQ(sync.stats().complete, 7u);
+  EXPECT_EQ(sync.stats().time_resets, 1u);
+  EXPECT_EQ(sync.stats().dropped_out_of_order, 0u);
+  EXPECT_EQ(sync.stats().dropped_stale, 0u);
+}
+
+TEST(FrameSyncTimeReset, JitterWithinThresholdIsDroppedWithoutReset) {
+  FrameSetSync<int> sync(3, SyncPolicy::Exact, 0.0, 8, 1.0);
+  for (double t : {100.0, 100.1, 100.2}) EXPECT_EQ(feed(sync, 3, t), 1u);
+  // 0.3 s and 0.9 s back: late images, not a new timeline.
+  EXPECT_TRUE(sync.add(0, sec(99.9), 0).empty());
+  EXPECT_TRUE(sync.add(2, sec(99.3), 2).empty());
+  EXPECT_EQ(sync.stats().dropped_out_of_order, 2u);
+  EXPECT_EQ(sync.stats().time_resets, 0u);
+  EXPECT_FALSE(sync.lastTimeReset());
+  EXPECT_EQ(feed(sync, 3, 100.3), 1u);
+  EXPECT_EQ(sync.stats().complete, 4u);
+}
+
+TEST(FrameSyncTimeReset, ApproximatePolicyResetsToo) {
+  FrameSetSync<int> sync(2, SyncPolicy::Approximate, 0.005, 8, 1.0);
+  for (double t : {50.0, 50.1}) {
+    sync.add(0, sec(t), 0);
+    EXPECT_EQ(sync.add(1, sec(t) + 2000000, 1).size(), 1u);  // 2 ms apart
+  }
+  sync.add(0, sec(10.0), 0);
+  EXPECT_EQ(sync.stats().time_resets, 1u);
+  EXPECT_EQ(sync.add(1, sec(10.0) - 1000000, 1).size(), 1u);
+}
+
+TEST(FrameSyncTimeReset, OldTimelineStragglersAreDroppedAsStale) {
+  FrameSetSync<int> sync(3, SyncPolicy::Exact, 0.0, 8, 1.0);
+  for (double t : {100.0, 100.1}) EXPECT_EQ(feed(sync, 3, t), 1u);
+  sync.add(0, sec(100.2), 0);
+  sync.add(0, sec(90.0), 0);  // reset by cam0
+  EXPECT_EQ(sync.stats().time_resets, 1u);
+  // cam1's and cam2's 100.2 images were still in flight: stale, no second reset.
+  EXPECT_TRUE(sync.add(1, sec(100.2), 1).empty());
+  EXPECT_TRUE(sync.add(2, sec(100.2), 2).empty());
+  EXPECT_EQ(sync.stats().dropped_stale, 2u);
+  EXPECT_EQ(sync.add(1, sec(90.0), 1).size(), 0u);
+  EXPECT_EQ(sync.add(2, sec(90.0), 2).size(), 1u);
+  EXPECT_EQ(feed(sync, 3, 90.1), 1u);
+  EXPECT_EQ(sync.stats().time_resets, 1u);
+}
+
+TEST(FrameSyncTimeReset, ClockJumpingBackResets) {
+  FrameSetSync<int> sync(2, SyncPolicy::Exact, 0.0, 8, 1.0);
+  for (double t : {100.0, 100.1}) EXPECT_EQ(feed(sync, 2, t), 1u);
+  EXPECT_FALSE(sync.clockAt(sec(100.1)));
+  EXPECT_FALSE(sync.clockAt(sec(99.5)));  // within the threshold
+  sync.add(0, sec(100.2), 0);
+  const auto r = sync.clockAt(sec(20.0));
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->from_ns, sec(100.2));
+  EXPECT_EQ(r->to_ns, sec(20.0));
+  EXPECT_NE(r->reason.find("clock jumped backwards"), std::string::npos) << r->reason;
+  EXPECT_EQ(sync.stats().time_resets, 1u);
+  EXPECT_EQ(sync.open(), 0u);
+  EXPECT_FALSE(sync.clockAt(sec(20.0)));  // once
+  // The new timeline may begin later than the clock at the reset (a bag whose
+  // first images come seconds after its start): they are not stale.
+  EXPECT_EQ(feed(sync, 2, 25.0), 1u);
+  EXPECT_EQ(feed(sync, 2, 25.1), 1u);
+  EXPECT_EQ(sync.stats().dropped_stale, 0u);
+}
+
+TEST(FrameSyncTimeReset, DisabledThresholdKeepsTheOldBehaviour) {
+  FrameSetSync<int> sync(2, SyncPolicy::Exact, 0.0, 8, 0.0);
+  EXPECT_EQ(feed(sync, 2, 100.0), 1u);
+  EXPECT_EQ(feed(sync, 2, 10.0), 0u);
+  EXPECT_EQ(sync.stats().dropped_out_of_order, 2u);
+  EXPECT_EQ(sync.stats().time_resets, 0u);
+  EXPECT_FALSE(sync.clockAt(sec(1.0)));
+}
+
+TEST(FrameSyncTimeReset, ManualResetForgetsStampsAndOpenSets) {
+  FrameSetSync<int> sync(2, SyncPolicy::Exact, 0.0, 8);
+  EXPECT_EQ(feed(sync, 2, 100.0), 1u);
+  sync.add(0, sec(100.1), 0);
+  sync.reset();
+  EXPECT_EQ(sync.open(), 0u);
+  EXPECT_EQ(sync.stats().dropped_incomplete, 1u);
+  EXPECT_EQ(feed(sync, 2, 99.5), 1u);  // older than the last set, but forgotten
+  EXPECT_EQ(sync.stats().time_resets, 0u);
+}
+
+TEST(StreamTimeline, TwoStreamsOneResetStragglersThenJoin) {
+  // Detections (stream 1) run ahead of depth (stream 0): detections reset the
+  // timeline first; the depth maps of the old play still in flight are stale,
+  // then depth joins without a second reset.
+  StreamTimeline tl(2, 1.0);
+  using K = StreamTimeline::Kind;
+  for (double t : {100.0, 100.1, 100.2}) {
+    EXPECT_EQ(tl.observe(0, sec(t)).kind, K::kOk);
+    EXPECT_EQ(tl.observe(1, sec(t)).kind, K::kOk);
+  }
+  EXPECT_EQ(tl.observe(1, sec(100.3)).kind, K::kOk);
+  const auto r = tl.observe(1, sec(90.0));
+  EXPECT_EQ(r.kind, K::kReset);
+  EXPECT_EQ(r.from_ns, sec(100.3));
+  EXPECT_EQ(r.to_ns, sec(90.0));
+  EXPECT_EQ(tl.observe(0, sec(100.3)).kind, K::kStale);
+  EXPECT_EQ(tl.observe(1, sec(90.1)).kind, K::kOk);
+  EXPECT_EQ(tl.observe(0, sec(90.0)).kind, K::kJoined);
+  EXPECT_EQ(tl.observe(0, sec(90.1)).kind, K::kOk);
+  EXPECT_EQ(tl.resets(), 1u);
+  EXPECT_EQ(tl.stale(), 1u);
+  // A second play of the same stamps is a new reset, not a join.
+  EXPECT_EQ(tl.observe(0, sec(88.0)).kind, K::kReset);
+  EXPECT_EQ(tl.resets(), 2u);
+}
+
+TEST(StreamTimeline, AStreamThatStaysAheadJoinsInsteadOfStallingAndSmallStepsAreOk) {
+  StreamTimeline tl(2, 1.0);
+  using K = StreamTimeline::Kind;
+  tl.observe(0, 100 * kS);
+  tl.observe(1, 100 * kS);
+  EXPECT_EQ(tl.observe(0, 50 * kS).kind, K::kReset);  // one glitched stamp on stream 0
+  // Stream 1 goes on at 100 s and beyond: stale at first, then no longer
+  // believed to be a straggler (more than 3 thresholds of its own time).
+  EXPECT_EQ(tl.observe(1, 101 * kS).kind, K::kStale);
+  EXPECT_EQ(tl.observe(1, 103 * kS).kind, K::kStale);
+  EXPECT_EQ(tl.observe(1, sec(104.5)).kind, K::kJoined);
+  EXPECT_EQ(tl.observe(1, 105 * kS).kind, K::kOk);
+  // Within the threshold: no reset.
+  EXPECT_EQ(tl.observe(1, sec(104.2)).kind, K::kOk);
+  EXPECT_THROW(tl.observe(2, 0), std::out_of_range);
+  EXPECT_THROW(StreamTimeline(0, 1.0), std::invalid_argument);
+}
