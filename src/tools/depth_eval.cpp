@@ -55,7 +55,7 @@ namespace {
   std::cerr << "depth_eval: " << msg << "\n"
             << "usage: depth_eval synthetic --camchain F --mount F --out DIR [--preset urban|forest] [--seed N]\n"
             << "                  [--frames N] [--start S] [--step S] [--backend auto|native|opencl|cpu] [--device D]\n"
-            << "                  [--max-range M]\n"
+            << "                  [--max-range M] [--realistic] [--sweep-camchain F]\n"
             << "       depth_eval vcharge --data DIR --camera left|right --out DIR [--device D] [--ground-z Z]\n"
             << "                  [--label TEXT]\n"
             << "       depth_eval vcharge-check --data DIR --camera left|right --depth-k F --depth-k1 F --out DIR\n"
@@ -67,6 +67,10 @@ std::map<std::string, std::string> parseArgs(int argc, char** argv, int first) {
   std::map<std::string, std::string> a;
   for (int i = first; i < argc; ++i) {
     const std::string k = argv[i];
+    if (k == "--realistic") {  // the one option without a value
+      a["realistic"] = "true";
+      continue;
+    }
     if (k.rfind("--", 0) != 0 || i + 1 >= argc) usage("bad argument '" + k + "'");
     a[k.substr(2)] = argv[++i];
   }
@@ -87,8 +91,44 @@ struct Row {
   double ms;
 };
 
+// Issue-13 figures of one depth image: sky pixels (no true range, a ray)
+// given a depth, and the relative error and coverage of the scene within
+// `within` metres.
+struct RealFigures {
+  double sky_share = 0, rel_median = NAN, coverage = 0;
+};
+RealFigures realFigures(const cv::Mat& depth, const cv::Mat& truth, const cv::Mat& has_ray, double within) {
+  size_t sky = 0, sky_depth = 0, scene = 0;
+  std::vector<float> rel;
+  for (int v = 0; v < truth.rows; ++v) {
+    for (int u = 0; u < truth.cols; ++u) {
+      if (!has_ray.at<uint8_t>(v, u)) continue;
+      const float t = truth.at<float>(v, u), d = depth.at<float>(v, u);
+      if (!std::isfinite(t)) {
+        ++sky;
+        sky_depth += std::isfinite(d);
+      } else if (t <= within) {
+        ++scene;
+        if (std::isfinite(d)) rel.push_back(std::fabs(d - t) / t);
+      }
+    }
+  }
+  RealFigures f;
+  f.sky_share = sky ? static_cast<double>(sky_depth) / sky : 0.0;
+  f.coverage = scene ? static_cast<double>(rel.size()) / scene : 0.0;
+  if (!rel.empty()) {
+    std::nth_element(rel.begin(), rel.begin() + rel.size() / 2, rel.end());
+    f.rel_median = rel[rel.size() / 2];
+  }
+  return f;
+}
+
 int runSynthetic(const std::map<std::string, std::string>& a) {
+  // `rig` renders (the truth); `given` is the calibration the sweep gets: the
+  // truth, the truth with the realistic calibration error, or --sweep-camchain.
   const fm::Rig rig = fm::loadKalibrRig(get(a, "camchain"), get(a, "mount"));
+  const bool realistic = get(a, "realistic", "false") == "true";
+  const fm::synth::Realism realism = realistic ? fm::synth::Realism::realistic() : fm::synth::Realism();
   const std::string out = get(a, "out");
   std::filesystem::create_directories(out);
   const int frames = std::stoi(get(a, "frames", "8"));
@@ -98,9 +138,26 @@ int runSynthetic(const std::map<std::string, std::string>& a) {
   wc.preset = get(a, "preset", "urban");
   wc.seed = static_cast<uint32_t>(std::stoul(get(a, "seed", "1")));
   wc.route_length = wc.speed * (start + step * frames) + 80;
+  wc.asphalt_grain = realism.asphalt_grain;
+  wc.clouds = realism.clouds;
   const fm::synth::World world(wc);
+  const int n_cams = static_cast<int>(rig.cameras.size());
+  const auto sensors = fm::synth::drawSensors(realism.sensors, n_cams, wc.seed);
+  const fm::Rig given =
+      a.count("sweep-camchain")
+          ? fm::loadKalibrRig(get(a, "sweep-camchain"), get(a, "mount"))
+          : fm::synth::perturbRig(rig, fm::synth::drawExtrinsicErrors(n_cams, realism.calib_rot_deg,
+                                                                      realism.calib_trans_mm, wc.seed));
+  if (given.cameras.size() != rig.cameras.size()) usage("--sweep-camchain has another number of cameras");
+  double calib_error_deg = 0.0;
+  for (int c = 1; c < n_cams; ++c) {
+    const Eigen::Isometry3d d = rig.cameras[c].T_cam0_cam.inverse() * given.cameras[c].T_cam0_cam;
+    calib_error_deg = std::max(calib_error_deg, Eigen::AngleAxisd(d.linear()).angle() * 180.0 / M_PI);
+  }
+  cv::Mat has_ray(rig.cameras[0].model.height(), rig.cameras[0].model.width(), CV_8UC1);
   std::vector<std::vector<Eigen::Vector3f>> rays;
   for (const auto& c : rig.cameras) rays.push_back(fm::pixelRays(c.model));
+  for (int i = 0; i < has_ray.rows * has_ray.cols; ++i) has_ray.data[i] = rays[0][i].allFinite() ? 1 : 0;
 
   fm::PlaneSweepConfig base;
   base.backend = get(a, "backend", "auto");
@@ -114,11 +171,17 @@ int runSynthetic(const std::map<std::string, std::string>& a) {
     c.filters = f;
     return c;
   };
+  fm::DepthFilterConfig vehicle_filters = base.filters, no_texture = base.filters;
+  vehicle_filters.uniqueness = false;  // as config/vehicle.yaml
+  no_texture.texture = false;
   fm::PlaneSweep full(configured("full", none)), half(configured("half", none)),
-      multi(configured("multiscale", none)), filtered(configured("multiscale", base.filters));
+      multi(configured("multiscale", none)), filtered(configured("multiscale", base.filters)),
+      vehicle(configured("multiscale", vehicle_filters)), untextured(configured("multiscale", no_texture));
+  std::vector<RealFigures> paper_figs, vehicle_figs;
+  std::vector<double> ms_texture, ms_no_texture;
   std::cerr << "depth_eval: backend " << multi.backendName() << "\n";
   const int ref = 0;
-  const Eigen::Isometry3d T_base_ref = rig.cameras[ref].T_base_cam;
+  const Eigen::Isometry3d T_base_ref = given.cameras[ref].T_base_cam;
   // Fig. 6 camera sets: the reference plus its supporting cameras.
   const std::vector<std::pair<std::string, std::vector<int>>> sets = {
       {"3 outer cameras", {3, 4}}, {"3 central cameras", {1, 2}}, {"5 cameras", {1, 2, 3, 4}}};
@@ -147,16 +210,16 @@ int runSynthetic(const std::map<std::string, std::string>& a) {
     cv::Mat truth;
     for (size_t c = 0; c < rig.cameras.size(); ++c) {
       auto frame = world.render(rig.cameras[c].model, rays[c], T_W_B * rig.cameras[c].T_base_cam, t,
-                                (static_cast<uint64_t>(wc.seed) << 32) ^ (f * 64 + c));
+                                (static_cast<uint64_t>(wc.seed) << 32) ^ (f * 64 + c), sensors[c]);
       images.push_back(frame.image);
       if (static_cast<int>(c) == ref) truth = frame.depth;
     }
     auto views = [&](const std::vector<int>& ids) {
       std::vector<fm::SweepView> v;
-      for (int i : ids) v.push_back(fm::rigSweepView(rig, i, ref, images[i]));
+      for (int i : ids) v.push_back(fm::rigSweepView(given, i, ref, images[i]));
       return v;
     };
-    const fm::SweepView ref_view = fm::rigSweepView(rig, ref, ref, images[ref]);
+    const fm::SweepView ref_view = fm::rigSweepView(given, ref, ref, images[ref]);
     const auto all = views({1, 2, 3, 4});
     const fm::DepthResult rf = full.compute(ref_view, all, &T_base_ref);
     const fm::DepthResult rh = half.compute(ref_view, all, &T_base_ref);
@@ -183,6 +246,16 @@ int runSynthetic(const std::map<std::string, std::string>& a) {
     for (const auto& s : sets) {
       const fm::DepthResult r = filtered.compute(ref_view, views(s.second), &T_base_ref);
       record(f, t, s.first, r.depth, truth, r.total_ms);
+      if (s.second.size() == 4) {
+        paper_figs.push_back(realFigures(r.depth, truth, has_ray, 20.0));
+        ms_texture.push_back(r.total_ms);
+      }
+    }
+    {
+      const fm::DepthResult rv = vehicle.compute(ref_view, all, &T_base_ref);
+      record(f, t, "5 cameras, vehicle.yaml filters", rv.depth, truth, rv.total_ms);
+      vehicle_figs.push_back(realFigures(rv.depth, truth, has_ray, 20.0));
+      ms_no_texture.push_back(untextured.compute(ref_view, all, &T_base_ref).total_ms);
     }
     if (f == 0) {
       const double near = base.near, far = base.far;
@@ -238,6 +311,42 @@ int runSynthetic(const std::map<std::string, std::string>& a) {
      << std::setprecision(3) << "- median error beyond 15 m: multi-scale " << far_multi << " m, full " << far_full
      << " m, half " << far_half << " m; within 10 % of full: " << verdict(far_multi <= 1.1 * far_full)
      << "; below half: " << verdict(far_multi < far_half) << "\n";
+  auto mean_of = [](const std::vector<RealFigures>& v, auto field) {
+    double s = 0;
+    int n = 0;
+    for (const auto& x : v) {
+      if (std::isfinite(field(x))) s += field(x), ++n;
+    }
+    return n ? s / n : NAN;
+  };
+  auto mean = [](const std::vector<double>& v) {
+    double s = 0;
+    for (double x : v) s += x;
+    return v.empty() ? NAN : s / v.size();
+  };
+  md << "\nReal-rig figures (" << (realistic ? "realistic drive" : "exact drive") << ", calibration given to the sweep "
+     << std::setprecision(2) << calib_error_deg << " deg off at most):\n"
+     << "| filters | sky pixels with depth | median relative error within 20 m | coverage within 20 m |\n"
+     << "|---|---:|---:|---:|\n";
+  for (const auto& [name, v] : {std::make_pair(std::string("paper (5 cameras)"), &paper_figs),
+                                std::make_pair(std::string("config/vehicle.yaml (no uniqueness)"), &vehicle_figs)}) {
+    md << "| " << name << " | " << std::setprecision(2) << 100 * mean_of(*v, [](const RealFigures& x) { return x.sky_share; })
+       << " % | " << 100 * mean_of(*v, [](const RealFigures& x) { return x.rel_median; }) << " % | " << std::setprecision(1)
+       << 100 * mean_of(*v, [](const RealFigures& x) { return x.coverage; }) << " % |\n";
+  }
+  {
+    std::ofstream rc(out + "/real_figures.csv");
+    rc << "filters,sky_share,rel_median_20m,coverage_20m,calibration_error_deg,ms_texture,ms_no_texture\n";
+    for (const auto& [name, v] : {std::make_pair(std::string("paper"), &paper_figs),
+                                  std::make_pair(std::string("vehicle"), &vehicle_figs)}) {
+      rc << name << "," << mean_of(*v, [](const RealFigures& x) { return x.sky_share; }) << ","
+         << mean_of(*v, [](const RealFigures& x) { return x.rel_median; }) << ","
+         << mean_of(*v, [](const RealFigures& x) { return x.coverage; }) << "," << calib_error_deg << ","
+         << mean(ms_texture) << "," << mean(ms_no_texture) << "\n";
+    }
+  }
+  md << std::setprecision(0) << "\nFiltered multi-scale depth: " << mean(ms_texture) << " ms per frame with the texture "
+     << "filter, " << mean(ms_no_texture) << " ms without.\n";
   md << "\n" << frames << " frames of the " << wc.preset << " preset (seed " << wc.seed << "), reference cam0, errors "
      << "over pixels with a true range up to " << max_range << " m; backend " << multi.backendName() << ".\n";
   std::ofstream(out + "/depth_summary.md") << md.str();
