@@ -237,6 +237,12 @@ def main():
                 md.append("")
                 md.extend(open(p).read().strip().splitlines())
                 md.append("")
+                log = os.path.join(o, preset, "refine_rig.txt")
+                if os.path.exists(log):
+                    md.append("```")
+                    md.extend(open(log).read().strip().splitlines())
+                    md.append("```")
+                    md.append("")
     # Timing
     md.append("### Timing")
     md.append("")

@@ -30,6 +30,17 @@ fm::CameraModel smallFisheye(int w = 256, int h = 136) {
   return fm::CameraModel::unified(in, 0.98, -0.02, 0.004, 0.0002, -0.0001);
 }
 
+// A 60 deg (horizontal) pinhole camera of the default rig's image size.
+fm::CameraModel narrowPinhole() {
+  fm::Intrinsics in;
+  in.width = 1024;
+  in.height = 544;
+  in.fx = in.fy = 512.0 / std::tan(30.0 * M_PI / 180.0);
+  in.cx = 511.5;
+  in.cy = 271.5;
+  return fm::CameraModel::pinhole(in);
+}
+
 // Window sums of W over R for the ZNCC function.
 float costOf(const std::vector<float>& w, const std::vector<float>& r) {
   double sw = 0, sww = 0, swr = 0, sr = 0, srr = 0;
@@ -228,15 +239,9 @@ TEST(PlaneSweepViews, NarrowCameraCountsInPixelsOfTheCoarserImage) {
   // does the matching.
   fm::PlaneSweepConfig config;
   const fm::CameraModel fisheye = smallFisheye(1024, 544);
-  fm::Intrinsics in;
-  in.width = 1024;
-  in.height = 544;
-  in.fx = in.fy = 512.0 / std::tan(30.0 * M_PI / 180.0);
-  in.cx = 511.5;
-  in.cy = 271.5;
   fm::SweepView narrow, wide;
   narrow.name = "narrow";
-  narrow.camera = fm::CameraModel::pinhole(in);
+  narrow.camera = narrowPinhole();
   narrow.T_ref_view.translation() = Eigen::Vector3d(0.11, 0, 0);
   wide.name = "wide";
   wide.camera = fisheye;
@@ -568,13 +573,7 @@ TEST(PlaneSweepAccuracy, NarrowCameraCloseToTheReferenceNeverMakesDepthWorse) {
   fm::Rig truth = fm::loadKalibrRig(FM_CONFIG_DIR "/rig/default_camchain.yaml", FM_CONFIG_DIR "/rig/default_mount.yaml");
   fm::RigCamera narrow = truth.cameras[0];
   narrow.name = "cam5";
-  fm::Intrinsics in;
-  in.width = 1024;
-  in.height = 544;
-  in.fx = in.fy = 512.0 / std::tan(30.0 * M_PI / 180.0);
-  in.cx = 511.5;
-  in.cy = 271.5;
-  narrow.model = fm::CameraModel::pinhole(in);
+  narrow.model = narrowPinhole();
   narrow.T_cam0_cam = Eigen::Isometry3d::Identity();
   narrow.T_cam0_cam.translation() = Eigen::Vector3d(0.11, 0.0, 0.0);
   narrow.T_base_cam = truth.cameras[0].T_base_cam * narrow.T_cam0_cam;
