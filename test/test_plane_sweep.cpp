@@ -307,6 +307,15 @@ TEST(PlaneSweepTexture, TexturelessRegionsReachingTheTopAreFound) {
   EXPECT_GT(cv::countNonZero(region.rowRange(0, 60)), 0.99 * 60 * 300);   // the sky
   EXPECT_EQ(cv::countNonZero(region.rowRange(63, 200)), 0);               // grown by 2 px only
   EXPECT_EQ(cv::countNonZero(region(cv::Rect(100, 120, 100, 50))), 0);    // not the wall
+  // A plain road filling a down-pitched camera's image up to its top edge
+  // (centred low) is not sky.
+  for (int v = 0; v < 200; ++v) {
+    for (int u = 0; u < 300; ++u) {
+      const bool road = v > 150 || (u > 120 && u < 180);
+      img.at<float>(v, u) = (road ? 0.4f : texture(rng)) + noise(rng);
+    }
+  }
+  EXPECT_EQ(cv::countNonZero(fm::texturelessRegions(img, cv::Mat(200, 300, CV_8UC1, cv::Scalar(255)), 1.5, 1.0 / 255)), 0);
 }
 
 TEST(PlaneSweepInput, BadInputGetsClearErrors) {

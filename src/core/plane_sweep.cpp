@@ -235,7 +235,7 @@ cv::Mat texturelessRegions(const cv::Mat& image, const cv::Mat& valid, double mi
   cv::Mat labels, stats, centroids;
   const int n = cv::connectedComponentsWithStats(flat, labels, stats, centroids, 4, CV_32S);
   // Regions reaching the top edge of the valid image (sky and what touches
-  // it), each at least 0.2 % of the valid pixels.
+  // it), centred in its upper half, each at least 0.2 % of the valid pixels.
   std::vector<uint8_t> top(n, 0);
   for (int v = 0; v < image.rows; ++v) {
     const int* l = labels.ptr<int>(v);
@@ -246,7 +246,12 @@ cv::Mat texturelessRegions(const cv::Mat& image, const cv::Mat& valid, double mi
   }
   const int min_area = std::max(1, static_cast<int>(0.002 * cv::countNonZero(valid)));
   std::vector<uint8_t> big(n, 0);
-  for (int i = 1; i < n; ++i) big[i] = (top[i] && stats.at<int>(i, cv::CC_STAT_AREA) >= min_area) ? 255 : 0;
+  // A region centred in the lower half is not taken for sky (a camera
+  // pitched down can see a plain road reaching the top of its image).
+  for (int i = 1; i < n; ++i) {
+    const bool upper = centroids.at<double>(i, 1) < 0.5 * image.rows;
+    big[i] = (top[i] && upper && stats.at<int>(i, cv::CC_STAT_AREA) >= min_area) ? 255 : 0;
+  }
   cv::Mat region(image.size(), CV_8UC1);
   for (int v = 0; v < image.rows; ++v) {
     const int* l = labels.ptr<int>(v);

@@ -163,7 +163,8 @@ double estimateNoiseStd(const cv::Mat& image, const cv::Mat& valid = cv::Mat());
 // valid area (the sky, and blank walls that touch it): connected
 // (4-neighbour) areas of valid pixels whose 3x3 standard deviation is below
 // min_snr times the image's noise (estimateNoiseStd, at least min_noise_std),
-// each at least 0.2 % of the valid pixels, grown by 2 pixels. CV_8UC1, 255
+// each at least 0.2 % of the valid pixels and centred in the upper half of
+// the image, grown by 2 pixels. CV_8UC1, 255
 // inside. (Textured surfaces such as a road can be flat at 3x3 too, hence
 // only regions reaching the top.)
 cv::Mat texturelessRegions(const cv::Mat& image, const cv::Mat& valid, double min_snr, double min_noise_std);
