@@ -13,11 +13,18 @@
 //             ~only_moving (true: publish the model's moving classes only),
 //             ~score_threshold / ~nms_threshold (override the YAML's).
 // A model that cannot be loaded is reported and the nodelet keeps running
-// (publishing nothing); bad images are reported and skipped.
+// (publishing nothing); bad images and any exception in a callback are
+// logged with the image stamp, counted and skipped.
+// /diagnostics: images in, detection sets out, errors (WARN for a while after
+// one; ERROR without a model). Stateless in time: nothing to reset when time
+// goes backwards.
 #include <memory>
 #include <mutex>
 
+#include <atomic>
+
 #include <cv_bridge/cv_bridge.h>
+#include <diagnostic_updater/diagnostic_updater.h>
 #include <image_transport/image_transport.h>
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
@@ -25,6 +32,8 @@
 
 #include "fisheye_mapping/Detection2DArray.h"
 #include "fisheye_mapping/core/detector.h"
+#include "fisheye_mapping/core/frame_sync.h"
+#include "fisheye_mapping/ros/stage_health.h"
 
 namespace fisheye_mapping {
 
@@ -57,6 +66,16 @@ class DetectorNodelet : public nodelet::Nodelet {
       load_error_ = e.what();
       NODELET_ERROR("detector has no model and will publish nothing: %s", e.what());
     }
+    diag_ = std::make_unique<diagnostic_updater::Updater>(nh, pnh, getName());
+    diag_->setHardwareID("detector");
+    diag_->add("detections", this, &DetectorNodelet::diagnose);
+    diag_timer_ = nh.createWallTimer(ros::WallDuration(1.0), [this](const ros::WallTimerEvent&) {
+      try {
+        diag_->force_update();
+      } catch (const std::exception& e) {
+        health_.error(std::string("diagnostics: ") + e.what());
+      }
+    });
     it_ = std::make_unique<image_transport::ImageTransport>(nh);
     auto connect = [this](const ros::SingleSubscriberPublisher&) { updateSubscription(); };
     det_pub_ = nh.advertise<Detection2DArray>("detections", 5, connect, connect);
@@ -66,8 +85,28 @@ class DetectorNodelet : public nodelet::Nodelet {
     }
   }
 
+  void diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat) {
+    if (detector_) {
+      stat.summary(diagnostic_msgs::DiagnosticStatus::OK, "detecting");
+    } else {
+      stat.summary(diagnostic_msgs::DiagnosticStatus::ERROR, "no model: " + load_error_);
+    }
+    stat.add("images in", images_in_.load());
+    stat.add("detection sets out", sets_out_.load());
+    health_.report(stat);
+  }
+
   void updateSubscription() {
     std::lock_guard<std::mutex> lock(connect_mutex_);
+    try {
+      subscribeIfWanted();
+    } catch (const std::exception& e) {  // e.g. an image_transport plugin that is not installed
+      health_.error(std::string("subscribing: ") + e.what());
+      NODELET_ERROR("cannot subscribe the image (~image_transport '%s'): %s", transport_.c_str(), e.what());
+    }
+  }
+
+  void subscribeIfWanted() {
     const bool wanted = det_pub_.getNumSubscribers() > 0 || (publish_annotated_ && image_pub_.getNumSubscribers() > 0);
     if (wanted && !sub_) {
       sub_ = it_->subscribe("image", 2, &DetectorNodelet::onImage, this, image_transport::TransportHints(transport_));
@@ -78,6 +117,7 @@ class DetectorNodelet : public nodelet::Nodelet {
 
   void onImage(const sensor_msgs::ImageConstPtr& msg) {
     std::lock_guard<std::mutex> lock(mutex_);
+    ++images_in_;
     if (!detector_) {
       NODELET_ERROR_THROTTLE(5.0, "image at %.3f not processed: no model (%s)", msg->header.stamp.toSec(),
                              load_error_.c_str());
@@ -112,11 +152,17 @@ class DetectorNodelet : public nodelet::Nodelet {
         out.detections.push_back(m);
       }
       det_pub_.publish(out);
+      ++sets_out_;
       if (publish_annotated_ && image_pub_.getNumSubscribers() > 0)
         image_pub_.publish(cv_bridge::CvImage(msg->header, enc::BGR8, annotateDetections(image, dets)).toImageMsg());
     } catch (const std::exception& ex) {
+      health_.error("image at " + formatStamp(std::int64_t(msg->header.stamp.toNSec())) + ": " + ex.what());
       NODELET_ERROR_THROTTLE(1.0, "image at %.3f (%ux%u) skipped: %s", msg->header.stamp.toSec(), msg->width,
                              msg->height, ex.what());
+    } catch (...) {
+      health_.error("image at " + formatStamp(std::int64_t(msg->header.stamp.toNSec())) + ": unknown exception");
+      NODELET_ERROR_THROTTLE(1.0, "image at %.3f (%ux%u) skipped: unknown exception", msg->header.stamp.toSec(),
+                             msg->width, msg->height);
     }
   }
 
@@ -128,6 +174,10 @@ class DetectorNodelet : public nodelet::Nodelet {
   image_transport::Publisher image_pub_;
   ros::Publisher det_pub_;
   std::mutex mutex_, connect_mutex_;
+  StageHealth health_;
+  std::unique_ptr<diagnostic_updater::Updater> diag_;
+  ros::WallTimer diag_timer_;
+  std::atomic<std::uint64_t> images_in_{0}, sets_out_{0};
 };
 
 }  // namespace fisheye_mapping

@@ -6,11 +6,17 @@
 // Publishes   frames (fisheye_mapping/CameraFrameSet): header = the reference
 //             (first) camera's image header; images in camera order.
 //             /diagnostics: per-camera input rates, sets out, incomplete sets
-//             dropped, out-of-order / bad images, latency, silent cameras.
+//             dropped, out-of-order / bad images, latency, silent cameras,
+//             time resets and callback errors (WARN for a while after one).
 // Parameters  ~camchain, ~mount (the rig), ~policy (exact | approximate),
 //             ~max_interval (s, approximate), ~queue_size (open sets),
 //             ~silent_warning (s of ROS time - sim time under a bag - without
-//             an image before a camera is reported).
+//             an image before a camera is reported), ~time_reset_threshold
+//             (s, default 1; 0: never reset).
+// Time going backwards (a bag played again, rosbag play restarted, a sim clock
+// reset): an image older than its camera's newest by more than the threshold,
+// or a ROS clock (sim time) behind the newest image by more than it, resets
+// the sync (core FrameSetSync), with a warning naming both stamps.
 // Any number of cameras (message_filters' Synchronizer stops at 9): the
 // grouping is the core FrameSetSync. Images whose size differs from the
 // calibration or whose encoding is not an 8-bit image are reported and dropped.
@@ -27,6 +33,7 @@
 #include "fisheye_mapping/CameraFrameSet.h"
 #include "fisheye_mapping/core/frame_sync.h"
 #include "fisheye_mapping/ros/ros_params.h"
+#include "fisheye_mapping/ros/stage_health.h"
 
 namespace fisheye_mapping {
 
@@ -44,6 +51,8 @@ class FrameSyncNodelet : public nodelet::Nodelet {
     pnh.param("max_interval", max_interval, max_interval);
     pnh.param("queue_size", queue, queue);
     pnh.param("silent_warning", silent_s_, 2.0);
+    double time_reset = 1.0;
+    pnh.param("time_reset_threshold", time_reset, time_reset);
     pnh.param<std::string>("image_transport", transport_, "raw");
     try {
       rig_ = loadRigFromParams(pnh);
@@ -57,7 +66,8 @@ class FrameSyncNodelet : public nodelet::Nodelet {
         throw CalibrationError("~image_topics has " + std::to_string(topics_.size()) + " topics for " +
                                std::to_string(rig_.cameras.size()) + " cameras");
       sync_ = std::make_unique<FrameSetSync<sensor_msgs::ImageConstPtr>>(int(topics_.size()), parseSyncPolicy(policy),
-                                                                         max_interval, std::size_t(std::max(1, queue)));
+                                                                         max_interval, std::size_t(std::max(1, queue)),
+                                                                         time_reset);
     } catch (const std::exception& e) {
       NODELET_FATAL("frame sync not started: %s", e.what());
       return;
@@ -69,7 +79,15 @@ class FrameSyncNodelet : public nodelet::Nodelet {
     diag_ = std::make_unique<diagnostic_updater::Updater>(nh, pnh, getName());
     diag_->setHardwareID("fisheye rig (" + std::to_string(topics_.size()) + " cameras)");
     diag_->add("frame sets", this, &FrameSyncNodelet::diagnose);
-    diag_timer_ = nh.createWallTimer(ros::WallDuration(1.0), [this](const ros::WallTimerEvent&) { diag_->force_update(); });
+    diag_timer_ = nh.createWallTimer(ros::WallDuration(1.0), [this](const ros::WallTimerEvent&) {
+      try {
+        diag_->force_update();
+      } catch (const std::exception& e) {
+        health_.error(std::string("diagnostics: ") + e.what());
+        NODELET_ERROR_THROTTLE(10.0, "diagnostics not published: %s", e.what());
+      }
+    });
+    clock_timer_ = nh.createWallTimer(ros::WallDuration(0.2), [this](const ros::WallTimerEvent&) { checkClock(); });
     std::string list;
     for (const auto& t : topics_) list += " " + t;
     NODELET_INFO("frame sync: %zu cameras (%s policy, max interval %.4f s):%s", topics_.size(), policy.c_str(),
@@ -78,6 +96,16 @@ class FrameSyncNodelet : public nodelet::Nodelet {
 
   void updateSubscription() {
     std::lock_guard<std::mutex> lock(connect_mutex_);
+    try {
+      subscribeIfWanted();
+    } catch (const std::exception& e) {  // e.g. an image_transport plugin that is not installed
+      health_.error(std::string("subscribing: ") + e.what());
+      NODELET_ERROR("cannot subscribe the camera topics (~image_transport '%s'): %s", transport_.c_str(), e.what());
+      subs_.clear();
+    }
+  }
+
+  void subscribeIfWanted() {
     const bool wanted = pub_.getNumSubscribers() > 0;
     if (wanted && subs_.empty()) {
       for (size_t i = 0; i < topics_.size(); ++i) {
@@ -91,8 +119,50 @@ class FrameSyncNodelet : public nodelet::Nodelet {
     }
   }
 
+  // Under sim time: a clock gone back behind the newest image resets the sync.
+  void checkClock() {
+    const std::int64_t now = simClockNs();
+    if (!now) return;
+    std::lock_guard<std::mutex> lock(mutex_);
+    try {
+      if (auto r = sync_->clockAt(now)) onTimeReset(*r);
+    } catch (const std::exception& e) {
+      health_.error(std::string("clock check: ") + e.what());
+      NODELET_ERROR_THROTTLE(10.0, "clock check failed: %s", e.what());
+    }
+  }
+
+  void onTimeReset(const FrameSetSync<sensor_msgs::ImageConstPtr>::TimeReset& r) {
+    NODELET_WARN("frame sync: time went backwards from %s s to %s s: %s", formatStamp(r.from_ns).c_str(),
+                 formatStamp(r.to_ns).c_str(), r.reason.c_str());
+    health_.timeReset(formatStamp(r.from_ns) + " s -> " + formatStamp(r.to_ns) + " s: " + r.reason);
+    seen_resets_ = sync_->stats().time_resets;
+    // Arrival times are ROS time: after the clock went back they lie ahead.
+    const ros::Time now = ros::Time::now();
+    for (auto& c : cams_) {
+      if (c.received) c.last_arrival = now;
+    }
+    started_ = now;
+  }
+
   void onImage(const sensor_msgs::ImageConstPtr& msg, int cam) {
     std::lock_guard<std::mutex> lock(mutex_);
+    try {
+      addImage(msg, cam);
+    } catch (const std::exception& e) {
+      health_.error("image at " + formatStamp(std::int64_t(msg->header.stamp.toNSec())) + " from " + topics_[cam] +
+                    ": " + e.what());
+      NODELET_ERROR_THROTTLE(1.0, "%s (%s): image at %.3f skipped: %s", rig_.cameras[cam].name.c_str(),
+                             topics_[cam].c_str(), msg->header.stamp.toSec(), e.what());
+    } catch (...) {
+      health_.error("image at " + formatStamp(std::int64_t(msg->header.stamp.toNSec())) + " from " + topics_[cam] +
+                    ": unknown exception");
+      NODELET_ERROR_THROTTLE(1.0, "%s (%s): image at %.3f skipped: unknown exception", rig_.cameras[cam].name.c_str(),
+                             topics_[cam].c_str(), msg->header.stamp.toSec());
+    }
+  }
+
+  void addImage(const sensor_msgs::ImageConstPtr& msg, int cam) {
     auto& c = cams_[cam];
     c.received++;
     c.last_arrival = ros::Time::now();
@@ -107,6 +177,7 @@ class FrameSyncNodelet : public nodelet::Nodelet {
       return;
     }
     auto sets = sync_->add(cam, std::int64_t(msg->header.stamp.toNSec()), msg);
+    if (sync_->stats().time_resets != seen_resets_ && sync_->lastTimeReset()) onTimeReset(*sync_->lastTimeReset());
     for (auto& images : sets) {
       CameraFrameSetPtr out(new CameraFrameSet);
       out->header = images[0]->header;
@@ -122,6 +193,14 @@ class FrameSyncNodelet : public nodelet::Nodelet {
 
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat) {
     std::lock_guard<std::mutex> lock(mutex_);
+    try {
+      diagnoseLocked(stat);
+    } catch (const std::exception& e) {
+      stat.summary(diagnostic_msgs::DiagnosticStatus::ERROR, std::string("diagnostics failed: ") + e.what());
+    }
+  }
+
+  void diagnoseLocked(diagnostic_updater::DiagnosticStatusWrapper& stat) {
     const ros::WallTime now = ros::WallTime::now();
     const ros::Time ros_now = ros::Time::now();  // sim time when a bag plays the clock
     if (started_.isZero()) started_ = ros_now;    // no clock yet when the subscription started
@@ -142,6 +221,7 @@ class FrameSyncNodelet : public nodelet::Nodelet {
     stat.add("frame sets out", s.complete);
     stat.add("incomplete sets dropped", s.dropped_incomplete);
     stat.add("out-of-order images dropped", s.dropped_out_of_order);
+    stat.add("stale images dropped (old timeline)", s.dropped_stale);
     stat.addf("mean latency (s)", "%.3f", s.complete ? latency_sum_ / s.complete : 0.0);
     if (!silent.empty()) {
       stat.mergeSummary(diagnostic_msgs::DiagnosticStatus::ERROR, "no images from" + silent);
@@ -150,6 +230,7 @@ class FrameSyncNodelet : public nodelet::Nodelet {
       stat.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN, "incomplete frame sets dropped");
       NODELET_WARN_THROTTLE(10.0, "%lu incomplete frame sets dropped so far", (unsigned long)s.dropped_incomplete);
     }
+    health_.report(stat);
     last_dropped_ = s.dropped_incomplete;
     last_complete_ = s.complete;
     last_diag_ = now;
@@ -169,7 +250,9 @@ class FrameSyncNodelet : public nodelet::Nodelet {
   std::vector<image_transport::Subscriber> subs_;
   ros::Publisher pub_;
   std::unique_ptr<diagnostic_updater::Updater> diag_;
-  ros::WallTimer diag_timer_;
+  ros::WallTimer diag_timer_, clock_timer_;
+  StageHealth health_;
+  std::uint64_t seen_resets_ = 0;
   ros::Time started_;
   ros::WallTime last_diag_ = ros::WallTime::now();
   std::uint64_t last_complete_ = 0, last_dropped_ = 0;

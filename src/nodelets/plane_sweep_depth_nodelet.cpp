@@ -11,11 +11,21 @@
 //             ~support_cameras (list; default all others), ~self_masks
 //             (dict camera -> mask image path, non-zero = car body),
 //             plane-sweep parameters (see config/plane_sweep_depth.yaml);
-//             filter thresholds also through dynamic_reconfigure.
+//             filter thresholds also through dynamic_reconfigure,
+//             ~time_reset_threshold (s, default 1; 0: never).
+//             /diagnostics: frame sets in, depth maps out, mean time, frame
+//             sets skipped (an error: logged with the stamp, the stage goes on),
+//             time resets (WARN for a while after either).
+// Time going backwards (frame-set stamps back by more than the threshold, or
+// the sim clock behind the newest stamp) is logged with both stamps and
+// counted; the stage keeps no other state keyed on time (each frame set is
+// swept on its own, the subscription queue holds one set).
+#include <atomic>
 #include <memory>
 #include <mutex>
 
 #include <cv_bridge/cv_bridge.h>
+#include <diagnostic_updater/diagnostic_updater.h>
 #include <dynamic_reconfigure/server.h>
 #include <nodelet/nodelet.h>
 #include <opencv2/imgcodecs.hpp>
@@ -26,7 +36,9 @@
 #include "fisheye_mapping/CameraFrameSet.h"
 #include "fisheye_mapping/PlaneSweepFiltersConfig.h"
 #include "fisheye_mapping/core/plane_sweep.h"
+#include "fisheye_mapping/core/frame_sync.h"
 #include "fisheye_mapping/ros/ros_params.h"
+#include "fisheye_mapping/ros/stage_health.h"
 
 namespace fisheye_mapping {
 
@@ -72,6 +84,20 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
       return;
     }
     pnh.param("publish_uniqueness", publish_uniqueness_, false);
+    double time_reset = 1.0;
+    pnh.param("time_reset_threshold", time_reset, time_reset);
+    timeline_ = std::make_unique<StreamTimeline>(1, time_reset);
+    diag_ = std::make_unique<diagnostic_updater::Updater>(nh, pnh, getName());
+    diag_->setHardwareID("plane sweep (" + sweep_->backendName() + ")");
+    diag_->add("depth", this, &PlaneSweepDepthNodelet::diagnose);
+    diag_timer_ = nh.createWallTimer(ros::WallDuration(1.0), [this](const ros::WallTimerEvent&) {
+      try {
+        diag_->force_update();
+      } catch (const std::exception& e) {
+        health_.error(std::string("diagnostics: ") + e.what());
+      }
+    });
+    clock_timer_ = nh.createWallTimer(ros::WallDuration(0.2), [this](const ros::WallTimerEvent&) { checkClock(); });
     reconfigure_ = std::make_unique<dynamic_reconfigure::Server<PlaneSweepFiltersConfig>>(reconfigure_mutex_, pnh);
     reconfigure_->setCallback([this](PlaneSweepFiltersConfig& c, uint32_t) { onReconfigure(c); });
 
@@ -101,12 +127,22 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
     try {
       sweep_->setFilters(f);
     } catch (const std::exception& e) {
+      health_.error(std::string("filter parameters rejected: ") + e.what());
       NODELET_ERROR("filter parameters rejected: %s", e.what());
     }
   }
 
   void updateSubscription() {
     std::lock_guard<std::mutex> lock(connect_mutex_);
+    try {
+      subscribeIfWanted();
+    } catch (const std::exception& e) {
+      health_.error(std::string("subscribing: ") + e.what());
+      NODELET_ERROR("cannot subscribe the frame sets: %s", e.what());
+    }
+  }
+
+  void subscribeIfWanted() {
     const bool wanted = depth_pub_.getNumSubscribers() > 0 || cost_pub_.getNumSubscribers() > 0 ||
                         (publish_uniqueness_ && uniqueness_pub_.getNumSubscribers() > 0);
     if (wanted && !sub_) {
@@ -126,9 +162,38 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
     throw std::invalid_argument(name + ": unsupported encoding '" + e + "' (mono8, mono16, 32FC1 or 8-bit colour)");
   }
 
+  void checkClock() {
+    const std::int64_t now = simClockNs();
+    if (!now) return;
+    std::lock_guard<std::mutex> lock(time_mutex_);
+    if (auto ev = timeline_->clock(now)) onTimeReset(*ev);
+  }
+
+  void onTimeReset(const StreamTimeline::Event& ev) {
+    NODELET_WARN("plane sweep: time went backwards from %s s to %s s (%s); depth stage time state reset",
+                 formatStamp(ev.from_ns).c_str(), formatStamp(ev.to_ns).c_str(), ev.reason.c_str());
+    health_.timeReset(formatStamp(ev.from_ns) + " s -> " + formatStamp(ev.to_ns) + " s: " + ev.reason);
+  }
+
+  void diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat) {
+    stat.summary(diagnostic_msgs::DiagnosticStatus::OK, "sweeping");
+    const std::uint64_t in = frames_in_, out = depth_out_;
+    stat.add("frame sets in", in);
+    stat.add("depth maps out", out);
+    stat.add("frame sets skipped", skipped_.load());
+    stat.addf("mean depth time (ms)", "%.1f", out ? total_ms_ / out : 0.0);
+    health_.report(stat);
+  }
+
   void onFrames(const CameraFrameSetConstPtr& set) {
     std::lock_guard<std::mutex> lock(mutex_);
     if (!sweep_) return;
+    ++frames_in_;
+    {
+      std::lock_guard<std::mutex> tl(time_mutex_);
+      const auto ev = timeline_->observe(0, std::int64_t(set->header.stamp.toNSec()));
+      if (ev.kind == StreamTimeline::Kind::kReset) onTimeReset(ev);
+    }
     try {
       if (set->camera_names.size() != set->images.size()) {
         throw std::invalid_argument("frame set has " + std::to_string(set->camera_names.size()) + " names but " +
@@ -163,8 +228,16 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
       cost_pub_.publish(cv_bridge::CvImage(header, enc::TYPE_32FC1, r.cost).toImageMsg());
       if (publish_uniqueness_) uniqueness_pub_.publish(cv_bridge::CvImage(header, enc::TYPE_32FC1, r.uniqueness).toImageMsg());
       NODELET_DEBUG("depth in %.1f ms (sweep %.1f, filters %.1f)", r.total_ms, r.sweep_ms, r.filter_ms);
+      total_ms_ = total_ms_ + r.total_ms;
+      ++depth_out_;
     } catch (const std::exception& e) {
+      ++skipped_;
+      health_.error("frame set at " + formatStamp(std::int64_t(set->header.stamp.toNSec())) + ": " + e.what());
       NODELET_ERROR_THROTTLE(0.2, "frame set at %.3f skipped: %s", set->header.stamp.toSec(), e.what());
+    } catch (...) {
+      ++skipped_;
+      health_.error("frame set at " + formatStamp(std::int64_t(set->header.stamp.toNSec())) + ": unknown exception");
+      NODELET_ERROR_THROTTLE(0.2, "frame set at %.3f skipped: unknown exception", set->header.stamp.toSec());
     }
   }
 
@@ -179,6 +252,13 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
   std::unique_ptr<dynamic_reconfigure::Server<PlaneSweepFiltersConfig>> reconfigure_;
   ros::Subscriber sub_;
   ros::Publisher depth_pub_, cost_pub_, uniqueness_pub_;
+  std::mutex time_mutex_;
+  std::unique_ptr<StreamTimeline> timeline_;
+  StageHealth health_;
+  std::unique_ptr<diagnostic_updater::Updater> diag_;
+  ros::WallTimer diag_timer_, clock_timer_;
+  std::atomic<std::uint64_t> frames_in_{0}, depth_out_{0}, skipped_{0};
+  std::atomic<double> total_ms_{0.0};
 };
 
 }  // namespace fisheye_mapping
