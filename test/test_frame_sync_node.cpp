@@ -1,6 +1,7 @@
 // rostest: the FrameSync nodelet groups the rig's camera topics into frame sets
 // in camera order with the reference header, drops and counts incomplete sets
-// and wrongly sized images, and reports a silent camera by name in /diagnostics.
+// and wrongly sized images, reports a silent camera by name in /diagnostics,
+// drops small steps back in time and resets when time goes back further.
 #include <cv_bridge/cv_bridge.h>
 #include <diagnostic_msgs/DiagnosticArray.h>
 #include <gtest/gtest.h>
@@ -83,13 +84,40 @@ TEST(FrameSyncNode, GroupsDropsAndDiagnoses) {
     std::lock_guard<std::mutex> l(mu);
     return last.level == diagnostic_msgs::DiagnosticStatus::ERROR;
   }, 5.0));
-  std::lock_guard<std::mutex> l(mu);
-  EXPECT_NE(last.message.find("cam2"), std::string::npos) << last.message;
+  {
+    std::lock_guard<std::mutex> l(mu);
+    EXPECT_NE(last.message.find("cam2"), std::string::npos) << last.message;
+    std::map<std::string, std::string> kv;
+    for (const auto& v : last.values) kv[v.key] = v.value;
+    EXPECT_EQ(kv["cam2 bad images"], "1");
+    EXPECT_EQ(kv["frame sets out"], "2");
+    EXPECT_GE(std::stoi(kv["incomplete sets dropped"]), 1);
+    EXPECT_EQ(kv["time resets"], "0");
+    EXPECT_EQ(kv["callback errors"], "0");
+  }
+  // 4. Time goes backwards (the player restarted): 0.3 s back is jitter
+  // (dropped), 20 s back resets the sync; the next sets complete and the reset
+  // is reported (WARN, the count, both stamps).
+  const ros::Time t4(140, 0), jitter(139, 700000000), t5(120, 0), t6(120, 100000000);
+  for (int c = 0; c < 3; ++c) cams[c].publish(image(256, 136, t4, "cam" + std::to_string(c), 4));
+  ASSERT_TRUE(waitFor([&] { std::lock_guard<std::mutex> l(mu); return sets.count(t4.toNSec()) > 0; }, 5.0));
+  for (int c = 0; c < 3; ++c) cams[c].publish(image(256, 136, jitter, "cam" + std::to_string(c), 4));
+  ros::WallDuration(0.3).sleep();
+  for (const ros::Time& t : {t5, t6}) {
+    for (int c = 0; c < 3; ++c) cams[c].publish(image(256, 136, t, "cam" + std::to_string(c), 5));
+    ASSERT_TRUE(waitFor([&] { std::lock_guard<std::mutex> l(mu); return sets.count(t.toNSec()) > 0; }, 5.0))
+        << "no frame set at " << t << " after time went backwards";
+  }
+  EXPECT_EQ(sets.count(jitter.toNSec()), 0u);
   std::map<std::string, std::string> kv;
-  for (const auto& v : last.values) kv[v.key] = v.value;
-  EXPECT_EQ(kv["cam2 bad images"], "1");
-  EXPECT_EQ(kv["frame sets out"], "2");
-  EXPECT_GE(std::stoi(kv["incomplete sets dropped"]), 1);
+  ASSERT_TRUE(waitFor([&] {
+    std::lock_guard<std::mutex> l(mu);
+    kv.clear();
+    for (const auto& v : last.values) kv[v.key] = v.value;
+    return kv["time resets"] == "1" && last.level == diagnostic_msgs::DiagnosticStatus::WARN;
+  }, 5.0)) << "the reset is not on /diagnostics: " << last.message;
+  EXPECT_NE(kv["last time reset"].find("140.000 s -> 120.000 s"), std::string::npos) << kv["last time reset"];
+  EXPECT_EQ(kv["out-of-order images dropped"], "3");
 }
 
 int main(int argc, char** argv) {
