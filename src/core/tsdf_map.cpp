@@ -6,7 +6,9 @@
 
 #include <chrono>
 
+#include <cerrno>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <cstring>
 #include <filesystem>
@@ -16,8 +18,6 @@
 
 namespace fisheye_mapping {
 namespace {
-
-constexpr char kMagic[8] = {'F', 'M', 'T', 'S', 'D', 'F', '0', '1'};
 
 int floorDiv(int a, int b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
 
@@ -84,6 +84,7 @@ std::string TsdfMap::swapPath(const BlockIndex& b) const {
   return name.str();
 }
 
+// Swap file: the block's voxels, then the CRC32 of those bytes.
 void TsdfMap::swapOut(const BlockIndex& index) {
   auto it = active_.find(index);
   if (it == active_.end()) return;
@@ -91,28 +92,99 @@ void TsdfMap::swapOut(const BlockIndex& index) {
   active_.erase(it);
   if (!config_.swap_directory.empty()) {
     const std::string path = swapPath(index);
-    std::ofstream f(path, std::ios::binary);
-    f.write(reinterpret_cast<const char*>(block->voxels.data()), sizeof(block->voxels));
-    if (!f) throw std::runtime_error(path + ": cannot write swapped block");
-    block.reset();
+    const uint32_t crc = crc32(block->voxels.data(), sizeof(block->voxels));
+    bool ok = false;
+    {
+      std::ofstream f(path, std::ios::binary | std::ios::trunc);
+      f.write(reinterpret_cast<const char*>(block->voxels.data()), sizeof(block->voxels));
+      f.write(reinterpret_cast<const char*>(&crc), sizeof(crc));
+      f.close();
+      ok = static_cast<bool>(f);
+    }
+    if (ok) {
+      block.reset();
+    } else {
+      // Keep the block in RAM rather than lose it.
+      std::error_code ec;
+      std::filesystem::remove(path, ec);
+      ++swap_write_failures_;
+      std::ostringstream msg;
+      msg << "cannot write swap file " << path << " (" << std::strerror(errno) << "): block (" << index.x() << ", "
+          << index.y() << ", " << index.z() << ") stays in RAM";
+      reportSwapError(false, msg.str());
+    }
   }
   swapped_[index] = std::move(block);
+}
+
+bool TsdfMap::readSwapFile(const BlockIndex& index, VoxelBlock* out, std::string* why) const {
+  const std::string path = swapPath(index);
+  std::ifstream f(path, std::ios::binary);
+  if (!f) {
+    *why = std::string("cannot open (") + std::strerror(errno) + ")";
+    return false;
+  }
+  uint32_t crc = 0;
+  f.read(reinterpret_cast<char*>(out->voxels.data()), sizeof(out->voxels));
+  f.read(reinterpret_cast<char*>(&crc), sizeof(crc));
+  if (!f) {
+    *why = "short file";
+    return false;
+  }
+  if (f.peek() != std::char_traits<char>::eof()) {
+    *why = "file longer than a block";
+    return false;
+  }
+  if (crc32(out->voxels.data(), sizeof(out->voxels)) != crc) {
+    *why = "checksum mismatch";
+    return false;
+  }
+  return true;
+}
+
+void TsdfMap::reportSwapError(bool lost, const std::string& message) const {
+  if (swap_error_cb_) {
+    swap_error_cb_(lost, message);
+  } else {
+    std::fprintf(stderr, "[TsdfMap] %s\n", message.c_str());
+  }
+}
+
+void TsdfMap::markLost(const BlockIndex& index, const std::string& why) const {
+  const std::string path = swapPath(index);
+  swapped_.erase(index);
+  disk_cache_.erase(index);
+  changed_.insert(index);  // its mesh is stale now
+  ++lost_blocks_;
+  std::error_code ec;
+  std::filesystem::remove(path, ec);
+  std::ostringstream msg;
+  msg << "swapped block (" << index.x() << ", " << index.y() << ", " << index.z() << ") lost: " << path << ": " << why
+      << "; the map goes on without it (" << lost_blocks_ << " lost so far)";
+  reportSwapError(true, msg.str());
 }
 
 std::unique_ptr<VoxelBlock> TsdfMap::takeSwapped(const BlockIndex& index) {
   auto it = swapped_.find(index);
   if (it == swapped_.end()) return nullptr;
   std::unique_ptr<VoxelBlock> block = std::move(it->second);
-  swapped_.erase(it);
   if (!block) {
-    const std::string path = swapPath(index);
-    block = std::make_unique<VoxelBlock>();
-    std::ifstream f(path, std::ios::binary);
-    f.read(reinterpret_cast<char*>(block->voxels.data()), sizeof(block->voxels));
-    if (!f) throw std::runtime_error(path + ": cannot read swapped block");
-    std::filesystem::remove(path);
-    disk_cache_.erase(index);
+    auto cached = disk_cache_.find(index);
+    if (cached != disk_cache_.end()) {
+      block = std::move(cached->second);
+      disk_cache_.erase(cached);
+    } else {
+      block = std::make_unique<VoxelBlock>();
+      std::string why;
+      if (!readSwapFile(index, block.get(), &why)) {
+        markLost(index, why);
+        return nullptr;
+      }
+    }
+    std::error_code ec;
+    std::filesystem::remove(swapPath(index), ec);
   }
+  swapped_.erase(index);
   return block;
 }
 
@@ -127,7 +199,10 @@ size_t TsdfMap::moveLocalMap(const Eigen::Vector3d& vehicle_W) {
     if (insideLocalMap(kv.first)) returning.push_back(kv.first);
   }
   for (const auto& b : leaving) swapOut(b);
-  for (const auto& b : returning) active_[b] = takeSwapped(b);
+  for (const auto& b : returning) {
+    std::unique_ptr<VoxelBlock> block = takeSwapped(b);
+    if (block) active_[b] = std::move(block);
+  }
   return leaving.size();
 }
 
@@ -153,6 +228,7 @@ IntegrationStats TsdfMap::integrate(const cv::Mat& depth, const CameraModel& cam
   auto ms_since = [](Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); };
   const auto t_start = Clock::now();
   const int nthreads = omp_get_max_threads();
+  const size_t lost_before = lost_blocks_;
   local_center_ = vehicle_W + config_.local_map_offset;
   has_local_center_ = true;
 
@@ -258,6 +334,7 @@ IntegrationStats TsdfMap::integrate(const cv::Mat& depth, const CameraModel& cam
   const auto t_local = Clock::now();
   stats.blocks_swapped_out = moveLocalMap(vehicle_W);
   stats.local_map_ms = ms_since(t_local);
+  stats.blocks_lost = lost_blocks_ - lost_before;
   return stats;
 }
 
@@ -297,10 +374,11 @@ const VoxelBlock* TsdfMap::block(const BlockIndex& index) const {
   auto cached = disk_cache_.find(index);
   if (cached != disk_cache_.end()) return cached->second.get();
   auto block = std::make_unique<VoxelBlock>();
-  const std::string path = swapPath(index);
-  std::ifstream f(path, std::ios::binary);
-  f.read(reinterpret_cast<char*>(block->voxels.data()), sizeof(block->voxels));
-  if (!f) throw std::runtime_error(path + ": cannot read swapped block");
+  std::string why;
+  if (!readSwapFile(index, block.get(), &why)) {
+    markLost(index, why);
+    return nullptr;
+  }
   return disk_cache_.emplace(index, std::move(block)).first->second.get();
 }
 
@@ -327,71 +405,12 @@ BlockSet TsdfMap::takeChangedBlocks() {
   return out;
 }
 
-void TsdfMap::save(const std::string& path) const {
-  const std::string tmp = path + ".tmp";
-  {
-    std::ofstream f(tmp, std::ios::binary);
-    if (!f) throw std::runtime_error(path + ": cannot open for writing");
-    const uint32_t version = 1;
-    const double vs = config_.voxel_size, tr = config_.truncation_voxels;
-    const uint64_t n = numBlocks();
-    f.write(kMagic, sizeof(kMagic));
-    f.write(reinterpret_cast<const char*>(&version), sizeof(version));
-    f.write(reinterpret_cast<const char*>(&vs), sizeof(vs));
-    f.write(reinterpret_cast<const char*>(&tr), sizeof(tr));
-    f.write(reinterpret_cast<const char*>(&n), sizeof(n));
-    for (const BlockIndex& b : allBlocks()) {
-      const int32_t idx[3] = {b.x(), b.y(), b.z()};
-      f.write(reinterpret_cast<const char*>(idx), sizeof(idx));
-      f.write(reinterpret_cast<const char*>(block(b)->voxels.data()), sizeof(VoxelBlock::voxels));
-    }
-    if (!f) throw std::runtime_error(path + ": write failed");
-  }
-  std::filesystem::rename(tmp, path);  // never leave a half-written map behind
-}
-
-void TsdfMap::load(const std::string& path) {
-  std::ifstream f(path, std::ios::binary);
-  if (!f) throw std::runtime_error(path + ": cannot open map file");
-  char magic[8];
-  uint32_t version = 0;
-  double vs = 0, tr = 0;
-  uint64_t n = 0;
-  f.read(magic, sizeof(magic));
-  f.read(reinterpret_cast<char*>(&version), sizeof(version));
-  f.read(reinterpret_cast<char*>(&vs), sizeof(vs));
-  f.read(reinterpret_cast<char*>(&tr), sizeof(tr));
-  f.read(reinterpret_cast<char*>(&n), sizeof(n));
-  if (!f || std::memcmp(magic, kMagic, sizeof(kMagic)) != 0 || version != 1) {
-    throw std::runtime_error(path + ": not a fisheye_mapping TSDF map (bad header)");
-  }
-  if (vs != config_.voxel_size || tr != config_.truncation_voxels) {
-    std::ostringstream msg;
-    msg << path << ": map has voxel_size " << vs << " and truncation_voxels " << tr
-        << ", the node is configured with " << config_.voxel_size << " and " << config_.truncation_voxels;
-    throw std::runtime_error(msg.str());
-  }
-  // Read everything before touching the map, so a corrupt file changes nothing.
-  std::unordered_map<BlockIndex, std::unique_ptr<VoxelBlock>, BlockIndexHash> loaded;
-  for (uint64_t i = 0; i < n; ++i) {
-    int32_t idx[3];
-    auto block = std::make_unique<VoxelBlock>();
-    f.read(reinterpret_cast<char*>(idx), sizeof(idx));
-    f.read(reinterpret_cast<char*>(block->voxels.data()), sizeof(VoxelBlock::voxels));
-    if (!f) throw std::runtime_error(path + ": truncated map file (block " + std::to_string(i) + " of " + std::to_string(n) + ")");
-    loaded[BlockIndex(idx[0], idx[1], idx[2])] = std::move(block);
-  }
-  clear();
-  for (auto& kv : loaded) {
-    changed_.insert(kv.first);
-    active_[kv.first] = std::move(kv.second);
-    if (!insideLocalMap(kv.first)) swapOut(kv.first);
-  }
-}
+// save / load / readHeader: tsdf_io.cpp.
 
 void TsdfMap::clear() {
   for (const auto& kv : swapped_) {
-    if (!kv.second) std::filesystem::remove(swapPath(kv.first));
+    std::error_code ec;  // a file already gone is no error here
+    if (!kv.second) std::filesystem::remove(swapPath(kv.first), ec);
   }
   active_.clear();
   swapped_.clear();

@@ -5,15 +5,31 @@
 // Publishes   mesh  (visualization_msgs/MarkerArray: one TRIANGLE_LIST per map
 //                    block, only blocks changed since the last publish)
 //             cloud (sensor_msgs/PointCloud2: surface points, world frame)
+//             /diagnostics (frames, errors caught, lost swap blocks, saves)
 // Services    ~save_mesh, ~save_cloud, ~save_map, ~load_map (FilePath),
 //             ~clear_map (std_srvs/Trigger)
 // Parameters  see README ("TSDF fusion nodelet").
+//
+// Nothing the user built is lost: every exception in a callback is caught,
+// logged with the frame stamp and counted (the stage goes on); SIGTERM saves
+// like SIGINT; the shutdown/autosave file is never replaced by an empty map,
+// and its previous version is kept as <path>.1; ~reload_map_on_start resumes
+// from it; a depth stamp far older than the last one (bag replayed, clock
+// reset) resets the time state and keeps the map (or clears it on request).
+#include <signal.h>
+
+#include <atomic>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
 #include <memory>
 #include <mutex>
 #include <unordered_map>
 #include <unordered_set>
 
 #include <cv_bridge/cv_bridge.h>
+#include <diagnostic_updater/diagnostic_updater.h>
 #include <message_filters/subscriber.h>
 #include <nodelet/nodelet.h>
 #include <pcl_conversions/pcl_conversions.h>
@@ -35,19 +51,74 @@
 #include "fisheye_mapping/ros/ros_params.h"
 
 namespace fisheye_mapping {
+namespace {
+
+// SIGTERM. roscpp installs a handler for SIGINT only; a SIGTERM (kill,
+// systemd, docker stop, roslaunch's escalation) ended a nodelet manager at
+// once, without unloading its nodelets: no map saved. While a TsdfFusion lives
+// in the process and SIGTERM still has its default action, SIGTERM asks roscpp
+// to shut down exactly as its own SIGINT handler does (ros::requestShutdown
+// only sets a flag, which roscpp's poll thread acts on: async-signal-safe).
+// The manager then unloads its nodelets and the destructor below saves. The
+// last TsdfFusion to go puts the previous disposition back (the handler's code
+// lives in this library).
+std::mutex g_sigterm_mutex;
+int g_sigterm_users = 0;
+bool g_sigterm_installed = false;
+struct sigaction g_sigterm_previous;
+
+void onSigterm(int) { ros::requestShutdown(); }
+
+// Returns a description of what was done.
+std::string acquireSigterm() {
+  std::lock_guard<std::mutex> lock(g_sigterm_mutex);
+  ++g_sigterm_users;
+  if (g_sigterm_installed) return "SIGTERM handler already installed";
+  struct sigaction current;
+  if (sigaction(SIGTERM, nullptr, &current) != 0) return std::string("cannot read SIGTERM's handler: ") + std::strerror(errno);
+  if ((current.sa_flags & SA_SIGINFO) || current.sa_handler != SIG_DFL) {
+    return "SIGTERM already has a handler in this process; left as it is";
+  }
+  struct sigaction sa;
+  std::memset(&sa, 0, sizeof(sa));
+  sa.sa_handler = &onSigterm;
+  sigemptyset(&sa.sa_mask);
+  sa.sa_flags = SA_RESTART;
+  if (sigaction(SIGTERM, &sa, &g_sigterm_previous) != 0) return std::string("cannot install a SIGTERM handler: ") + std::strerror(errno);
+  g_sigterm_installed = true;
+  return "SIGTERM shuts down like SIGINT (the map is saved)";
+}
+
+void releaseSigterm() {
+  std::lock_guard<std::mutex> lock(g_sigterm_mutex);
+  if (--g_sigterm_users > 0 || !g_sigterm_installed) return;
+  struct sigaction current;
+  if (sigaction(SIGTERM, nullptr, &current) == 0 && !(current.sa_flags & SA_SIGINFO) &&
+      current.sa_handler == &onSigterm) {
+    sigaction(SIGTERM, &g_sigterm_previous, nullptr);
+  }
+  g_sigterm_installed = false;
+}
+
+}  // namespace
 
 class TsdfFusionNodelet : public nodelet::Nodelet {
  public:
   ~TsdfFusionNodelet() override {
-    std::lock_guard<std::mutex> lock(mutex_);
-    if (map_ && !save_on_shutdown_.empty()) {
-      try {
-        map_->save(save_on_shutdown_);
-        NODELET_INFO("map saved to %s", save_on_shutdown_.c_str());
-      } catch (const std::exception& e) {
-        NODELET_ERROR("could not save the map on shutdown: %s", e.what());
+    autosave_timer_.stop();
+    timer_.stop();
+    diag_timer_.stop();
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (map_ && !save_on_shutdown_.empty()) {
+        if (changes_ == saved_changes_) {
+          say(false, "map unchanged since it was saved to / loaded from " + save_on_shutdown_ + ": not rewritten");
+        } else {
+          saveToShutdownPath("shutdown");
+        }
       }
     }
+    if (sigterm_acquired_) releaseSigterm();
   }
 
  private:
@@ -57,6 +128,10 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     pnh.param("world_frame", world_frame_, std::string("map"));
     pnh.param("base_frame", base_frame_, std::string("base_link"));
     pnh.param("save_map_on_shutdown", save_on_shutdown_, std::string());
+    pnh.param("reload_map_on_start", reload_on_start_, false);
+    pnh.param("autosave_period", autosave_period_, 0.0);
+    pnh.param("clear_map_on_time_reset", clear_on_time_reset_, false);
+    pnh.param("time_reset_threshold", time_reset_threshold_, 1.0);
     pnh.param("output_directory", output_dir_, std::string("/tmp"));
     double publish_period = 1.0;
     pnh.param("publish_period", publish_period, publish_period);
@@ -64,6 +139,18 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     pnh.param("queue_size", queue_size, queue_size);
     TsdfConfig cfg;
     try {
+      if (!(autosave_period_ >= 0.0) || !std::isfinite(autosave_period_)) {
+        throw std::invalid_argument("~autosave_period must be >= 0 seconds (0: off), got " +
+                                    std::to_string(autosave_period_));
+      }
+      if (!(time_reset_threshold_ > 0.0) || !std::isfinite(time_reset_threshold_)) {
+        throw std::invalid_argument("~time_reset_threshold must be > 0 seconds, got " +
+                                    std::to_string(time_reset_threshold_));
+      }
+      if (!save_on_shutdown_.empty() && std::filesystem::is_directory(save_on_shutdown_)) {
+        throw std::invalid_argument("~save_map_on_shutdown '" + save_on_shutdown_ +
+                                    "' is a directory; give a file path (e.g. " + save_on_shutdown_ + "/map.fmtsdf)");
+      }
       cfg = tsdfConfigFrom(RosParams(pnh));
       rig_ = loadRigFromParams(pnh);
       map_ = std::make_unique<TsdfMap>(cfg);
@@ -71,7 +158,19 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
       NODELET_ERROR("TSDF fusion not started: %s", e.what());
       return;
     }
+    map_->setSwapErrorCallback([this](bool lost, const std::string& message) {
+      // Called with mutex_ held, from the map: log and count only.
+      if (lost) {
+        NODELET_ERROR("%s", message.c_str());  // once per block: it is gone afterwards
+      } else {
+        NODELET_ERROR_THROTTLE(5.0, "%s (%zu swap writes failed so far)", message.c_str(),
+                               map_->numSwapWriteFailures());
+      }
+    });
     mesher_ = std::make_unique<TsdfMesher>(cfg.min_observations);
+    if (!save_on_shutdown_.empty()) prepareShutdownPath();
+    sigterm_acquired_ = true;
+    NODELET_INFO("%s", acquireSigterm().c_str());
 
     tf_buffer_ = std::make_unique<tf2_ros::Buffer>(ros::Duration(30.0));
     tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_, nh);
@@ -81,18 +180,32 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     tf_filter_->registerCallback(&TsdfFusionNodelet::onDepth, this);
     tf_filter_->registerFailureCallback([this](const sensor_msgs::ImageConstPtr& msg,
                                                tf2_ros::filter_failure_reasons::FilterFailureReason reason) {
-      ++dropped_no_tf_;
-      done(msg->header, "no transform from '" + msg->header.frame_id + "' to '" + world_frame_ + "'");
-      NODELET_WARN_THROTTLE(5.0, "depth frame at %.3f (frame '%s') dropped: no transform to '%s' (%s); %zu so far",
-                            msg->header.stamp.toSec(), msg->header.frame_id.c_str(), world_frame_.c_str(),
-                            reason == tf2_ros::filter_failure_reasons::OutTheBack ? "too old for the tf buffer"
-                                                                                  : "tf never arrived",
-                            dropped_no_tf_);
+      try {
+        ++dropped_no_tf_;
+        {
+          // A bag played again: its tf lies before the cache's newest data, so
+          // frames fail here and never reach onDepth.
+          std::lock_guard<std::mutex> lock(mutex_);
+          handleTimeReset(msg->header.stamp);
+        }
+        done(msg->header, "no transform from '" + msg->header.frame_id + "' to '" + world_frame_ + "'");
+        NODELET_WARN_THROTTLE(5.0, "depth frame at %.3f (frame '%s') dropped: no transform to '%s' (%s); %zu so far",
+                              msg->header.stamp.toSec(), msg->header.frame_id.c_str(), world_frame_.c_str(),
+                              reason == tf2_ros::filter_failure_reasons::OutTheBack ? "too old for the tf buffer"
+                                                                                    : "tf never arrived",
+                              static_cast<size_t>(dropped_no_tf_));
+      } catch (const std::exception& e) {
+        noteException(depth_errors_, "tf failure", msg->header.stamp, e.what());
+      } catch (...) {
+        noteException(depth_errors_, "tf failure", msg->header.stamp, "unknown exception");
+      }
     });
     // Only changed blocks go out on each update; a subscriber that connects
     // later (rviz started mid-drive) is first sent the whole mesh.
     mesh_pub_ = nh.advertise<visualization_msgs::MarkerArray>(
-        "mesh", 16, [this](const ros::SingleSubscriberPublisher& pub) { pub.publish(fullMesh()); });
+        "mesh", 16, [this](const ros::SingleSubscriberPublisher& pub) {
+          guarded(timer_errors_, "mesh subscriber connect", [&] { pub.publish(fullMesh()); });
+        });
     cloud_pub_ = nh.advertise<sensor_msgs::PointCloud2>("cloud", 2, true);
     // One FrameDone per depth frame finished with (fused or skipped): the
     // paced bag player waits for it.
@@ -102,10 +215,193 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     services_.push_back(pnh.advertiseService("save_map", &TsdfFusionNodelet::saveMap, this));
     services_.push_back(pnh.advertiseService("load_map", &TsdfFusionNodelet::loadMap, this));
     services_.push_back(pnh.advertiseService("clear_map", &TsdfFusionNodelet::clearMap, this));
-    timer_ = nh.createWallTimer(ros::WallDuration(publish_period), [this](const ros::WallTimerEvent&) { publish(); });
+    timer_ = nh.createWallTimer(ros::WallDuration(publish_period), [this](const ros::WallTimerEvent&) {
+      guarded(timer_errors_, "publish timer", [this] { publish(); });
+    });
+    if (autosave_period_ > 0.0) {
+      if (save_on_shutdown_.empty()) {
+        NODELET_WARN("~autosave_period %.1f s ignored: ~save_map_on_shutdown is not set", autosave_period_);
+      } else {
+        autosave_timer_ = nh.createWallTimer(ros::WallDuration(autosave_period_), [this](const ros::WallTimerEvent&) {
+          guarded(timer_errors_, "autosave timer", [this] { autosave(); });
+        });
+      }
+    }
+    diag_ = std::make_unique<diagnostic_updater::Updater>(nh, pnh, getName());
+    diag_->setHardwareID("none");
+    diag_->add("TSDF fusion", this, &TsdfFusionNodelet::diagnose);
+    diag_timer_ = nh.createWallTimer(ros::WallDuration(1.0), [this](const ros::WallTimerEvent&) {
+      guarded(timer_errors_, "diagnostics timer", [this] { diag_->force_update(); });
+    });
     NODELET_INFO("TSDF fusion: voxel %.3f m, truncation %.3f m, local map %.0fx%.0fx%.0f m, %s integrator",
                  cfg.voxel_size, cfg.truncation(), cfg.local_map_size.x(), cfg.local_map_size.y(), cfg.local_map_size.z(),
                  cfg.integrator.c_str());
+  }
+
+  // Runs fn; an exception is logged with the last frame's stamp, counted, and
+  // the stage goes on.
+  template <typename Fn>
+  void guarded(std::atomic<size_t>& counter, const char* where, Fn fn) {
+    try {
+      fn();
+    } catch (const std::exception& e) {
+      noteException(counter, where, last_stamp_seen_, e.what());
+    } catch (...) {
+      noteException(counter, where, last_stamp_seen_, "unknown exception");
+    }
+  }
+
+  void noteException(std::atomic<size_t>& counter, const char* where, const ros::Time& stamp, const std::string& what) {
+    ++counter;
+    {
+      std::lock_guard<std::mutex> lock(error_mutex_);
+      last_error_ = std::string(where) + ": " + what;
+    }
+    NODELET_ERROR("exception in the %s callback (frame stamp %.3f): %s; caught, the stage goes on (%zu so far there)",
+                  where, stamp.toSec(), what.c_str(), static_cast<size_t>(counter));
+  }
+
+  // ~save_map_on_shutdown at start: resume from it when asked, else say what
+  // the first save will do with the file there.
+  void prepareShutdownPath() {
+    const std::string& path = save_on_shutdown_;
+    std::error_code ec;
+    if (reload_on_start_) {
+      for (const std::string& p : {path, path + ".1"}) {
+        if (!std::filesystem::exists(p, ec)) continue;
+        try {
+          map_->load(p);
+          ++changes_;
+          if (p == path) {
+            saved_changes_ = changes_;
+          } else {
+            keep_previous_ = false;  // the main file is bad: the next save replaces it, .1 stays
+          }
+          mesher_->clear();
+          cleared_ = true;
+          NODELET_INFO("resumed the map from %s: %zu blocks", p.c_str(), map_->numBlocks());
+          return;
+        } catch (const std::exception& e) {
+          NODELET_ERROR("cannot resume from %s: %s", p.c_str(), e.what());
+        }
+      }
+      NODELET_WARN("~reload_map_on_start: no loadable map at %s (or %s.1); starting empty", path.c_str(), path.c_str());
+      return;
+    }
+    try {
+      if (std::filesystem::exists(path, ec)) {
+        const MapFileInfo info = TsdfMap::readHeader(path);
+        if (info.num_blocks > 0) {
+          NODELET_WARN("%s holds a map of %llu blocks and ~reload_map_on_start is false: this map starts empty; "
+                       "an empty map never replaces it, and the first save keeps it as %s.1",
+                       path.c_str(), static_cast<unsigned long long>(info.num_blocks), path.c_str());
+        }
+      }
+    } catch (const std::exception& e) {
+      NODELET_WARN("%s is not a readable map (%s); the first save keeps it as %s.1", path.c_str(), e.what(),
+                   path.c_str());
+    }
+  }
+
+  // Saves to ~save_map_on_shutdown (mutex_ held): never an empty map over a
+  // non-empty file; the first save of this run keeps the file found there as
+  // <path>.1.
+  bool saveToShutdownPath(const char* why) {
+    MapSaveOptions options;
+    options.refuse_empty_overwrite = true;
+    options.keep_previous = keep_previous_;
+    try {
+      const size_t changes = changes_;
+      std::error_code ec;
+      const bool kept = options.keep_previous && std::filesystem::is_regular_file(save_on_shutdown_, ec);
+      map_->save(save_on_shutdown_, options);
+      keep_previous_ = false;
+      saved_changes_ = changes;
+      ++saves_ok_;
+      say(false, std::string(why) + ": map saved to " + save_on_shutdown_ + " (" + std::to_string(map_->numBlocks()) +
+                     " blocks" + (kept ? ", the file found there kept as .1)" : ")"));
+      return true;
+    } catch (const std::exception& e) {
+      ++saves_failed_;
+      {
+        std::lock_guard<std::mutex> lock(error_mutex_);
+        last_save_error_ = e.what();
+      }
+      say(true, std::string(why) + ": map not saved: " + e.what());
+      return false;
+    }
+  }
+
+  // Logs through rosconsole, or on stderr once roscpp has shut down (its
+  // console goes with it), as during the shutdown save.
+  void say(bool error, const std::string& message) {
+    if (ros::ok()) {
+      if (error) {
+        NODELET_ERROR("%s", message.c_str());
+      } else {
+        NODELET_INFO("%s", message.c_str());
+      }
+    } else {
+      std::fprintf(stderr, "[%s] [%s]: %s\n", error ? "ERROR" : " INFO", getName().c_str(), message.c_str());
+    }
+  }
+
+  void autosave() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    // An empty map is never worth a file (and never replaces one).
+    if (!map_ || changes_ == saved_changes_ || map_->numBlocks() == 0) return;
+    saveToShutdownPath("autosave");
+  }
+
+  // Time went backwards by more than time_reset_threshold_ (a bag played
+  // again, a sim clock reset): forget the time state (last stamp, tf cache)
+  // and keep the map, or clear it with ~clear_map_on_time_reset. mutex_ held.
+  bool handleTimeReset(const ros::Time& stamp) {
+    if (last_stamp_.isZero() || !(stamp + ros::Duration(time_reset_threshold_) < last_stamp_)) return false;
+    ++time_resets_;
+    NODELET_WARN("depth stamp %.3f is %.3f s older than the last fused frame (%.3f): time went backwards (bag played "
+                 "again or clock reset); tf cache cleared, %s",
+                 stamp.toSec(), (last_stamp_ - stamp).toSec(), last_stamp_.toSec(),
+                 clear_on_time_reset_ ? "map cleared (~clear_map_on_time_reset)"
+                                      : "map kept (~clear_map_on_time_reset: false; call ~clear_map to start afresh)");
+    last_stamp_ = ros::Time();
+    tf_buffer_->clear();
+    if (clear_on_time_reset_) {
+      map_->clear();
+      mesher_->clear();
+      cleared_ = true;
+      ++changes_;
+    }
+    return true;
+  }
+
+  void diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    const size_t lost = map_->numLostBlocks(), write_failures = map_->numSwapWriteFailures();
+    const size_t errors = depth_errors_ + service_errors_ + timer_errors_;
+    stat.summary(diagnostic_msgs::DiagnosticStatus::OK, "fusing");
+    std::string problems;
+    if (errors) problems += " exceptions caught;";
+    if (lost) problems += " swapped blocks lost;";
+    if (write_failures) problems += " swap writes failed (blocks kept in RAM);";
+    if (saves_failed_) problems += " saves failed;";
+    if (time_resets_) problems += " time went backwards;";
+    if (!problems.empty()) stat.summary(diagnostic_msgs::DiagnosticStatus::WARN, problems.substr(1));
+    stat.add("frames fused", frames_fused_);
+    stat.add("frames dropped (no tf)", static_cast<size_t>(dropped_no_tf_));
+    stat.add("exceptions in depth callbacks", static_cast<size_t>(depth_errors_));
+    stat.add("exceptions in services", static_cast<size_t>(service_errors_));
+    stat.add("exceptions in timers", static_cast<size_t>(timer_errors_));
+    stat.add("lost swapped blocks", lost);
+    stat.add("swap write failures", write_failures);
+    stat.add("time resets", static_cast<size_t>(time_resets_));
+    stat.add("blocks", map_->numBlocks());
+    stat.add("active blocks", map_->numActiveBlocks());
+    stat.add("saves to save_map_on_shutdown", static_cast<size_t>(saves_ok_));
+    stat.add("failed saves", static_cast<size_t>(saves_failed_));
+    std::lock_guard<std::mutex> elock(error_mutex_);
+    if (!last_error_.empty()) stat.add("last exception", last_error_);
+    if (!last_save_error_.empty()) stat.add("last save error", last_save_error_);
   }
 
   // Tells the paced player that this depth frame is finished with.
@@ -123,8 +419,27 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
       TsdfFusionNodelet* self;
       const std_msgs::Header& header;
       std::string& why;
-      ~Ack() { self->done(header, why); }
+      ~Ack() {
+        try {
+          self->done(header, why);
+        } catch (...) {
+        }
+      }
     } ack{this, msg->header, skipped};
+    last_stamp_seen_ = msg->header.stamp;
+    try {
+      fuse(msg, &skipped);
+    } catch (const std::exception& e) {
+      skipped = std::string("error: ") + e.what();
+      noteException(depth_errors_, "depth", msg->header.stamp, e.what());
+    } catch (...) {
+      skipped = "error: unknown exception";
+      noteException(depth_errors_, "depth", msg->header.stamp, "unknown exception");
+    }
+  }
+
+  void fuse(const sensor_msgs::ImageConstPtr& msg, std::string* skipped_because) {
+    std::string& skipped = *skipped_because;
     const int cam_index = cameraIndex(msg->header.frame_id);
     if (cam_index < 0) {
       skipped = "frame '" + msg->header.frame_id + "' is not a camera of the rig";
@@ -137,12 +452,20 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
                             msg->encoding.c_str());
       return;
     }
-    if (!last_stamp_.isZero() && msg->header.stamp < last_stamp_) {
-      skipped = "stamp older than the last fused frame (time went backwards)";
-      NODELET_WARN("depth stamp %.3f is older than the last fused one (%.3f): time went backwards; frame skipped "
-                   "(call ~clear_map after restarting a bag)",
-                   msg->header.stamp.toSec(), last_stamp_.toSec());
-      return;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (handleTimeReset(msg->header.stamp)) {
+        // Its pose came from the tf cache of the old time line.
+        skipped = "time went backwards: time state reset, frame skipped";
+        return;
+      }
+      if (!last_stamp_.isZero() && msg->header.stamp < last_stamp_) {
+        skipped = "stamp older than the last fused frame (out of order)";
+        NODELET_WARN_THROTTLE(5.0, "depth stamp %.3f is older than the last fused one (%.3f) by less than %.1f s: "
+                              "frame out of order, skipped",
+                              msg->header.stamp.toSec(), last_stamp_.toSec(), time_reset_threshold_);
+        return;
+      }
     }
     Eigen::Isometry3d T_W_C, T_W_B;
     try {
@@ -166,9 +489,14 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
       const auto stats = map_->integrate(depth->image, rig_.cameras[cam_index].model, T_W_C, T_W_B.translation());
       last_stamp_ = msg->header.stamp;
       ++frames_fused_;
+      ++changes_;
       skipped.clear();
       NODELET_DEBUG("fused frame %.3f: %zu valid pixels, %zu blocks", msg->header.stamp.toSec(), stats.valid_pixels,
                     stats.blocks_touched);
+      if (stats.blocks_lost) {
+        NODELET_WARN("frame %.3f: %zu swapped blocks could not be read back and are lost (%zu so far)",
+                     msg->header.stamp.toSec(), stats.blocks_lost, map_->numLostBlocks());
+      }
     } catch (const std::invalid_argument& e) {
       skipped = e.what();
       NODELET_WARN_THROTTLE(5.0, "depth frame at %.3f skipped: %s", msg->header.stamp.toSec(), e.what());
@@ -295,6 +623,10 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
       res.success = false;
       res.message = e.what();
       NODELET_ERROR("%s %s failed: %s", what, path.c_str(), e.what());
+    } catch (...) {
+      res.success = false;
+      res.message = std::string(what) + " " + path + ": unknown exception";
+      noteException(service_errors_, what, last_stamp_, "unknown exception");
     }
     return true;
   }
@@ -315,8 +647,10 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     return run(res, pathOr(req.path, "map.fmtsdf"), "save map to", [this](const std::string& p) { map_->save(p); });
   }
   bool loadMap(fisheye_mapping::FilePath::Request& req, fisheye_mapping::FilePath::Response& res) {
+    // The file is read and checked whole before the live map is replaced.
     return run(res, pathOr(req.path, "map.fmtsdf"), "load map from", [this](const std::string& p) {
       map_->load(p);
+      ++changes_;
       mesher_->clear();
       cleared_ = true;
     });
@@ -324,12 +658,19 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
   bool clearMap(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
     std::lock_guard<std::mutex> lock(mutex_);
     if (!map_) return res.success = false, res.message = "the TSDF fusion did not start", true;
-    map_->clear();
-    mesher_->clear();
-    last_stamp_ = ros::Time();
-    cleared_ = true;
-    res.success = true;
-    res.message = "map cleared";
+    try {
+      map_->clear();
+      mesher_->clear();
+      last_stamp_ = ros::Time();
+      cleared_ = true;
+      ++changes_;
+      res.success = true;
+      res.message = "map cleared";
+    } catch (const std::exception& e) {
+      res.success = false;
+      res.message = std::string("clear failed: ") + e.what();
+      noteException(service_errors_, "clear_map", last_stamp_, e.what());
+    }
     return true;
   }
 
@@ -343,10 +684,24 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
   std::unique_ptr<tf2_ros::MessageFilter<sensor_msgs::Image>> tf_filter_;
   ros::Publisher mesh_pub_, cloud_pub_, done_pub_;
   std::vector<ros::ServiceServer> services_;
-  ros::WallTimer timer_;
+  ros::WallTimer timer_, autosave_timer_, diag_timer_;
+  std::unique_ptr<diagnostic_updater::Updater> diag_;
   std::string world_frame_, base_frame_, save_on_shutdown_, output_dir_;
+  bool reload_on_start_ = false, clear_on_time_reset_ = false;
+  double autosave_period_ = 0.0, time_reset_threshold_ = 1.0;
+  bool sigterm_acquired_ = false;
+  bool keep_previous_ = true;  // the first save to save_map_on_shutdown keeps the file found there as .1
+  // Map changes (frames fused, loads, clears) and the count at the last save
+  // to / load from save_map_on_shutdown (-1: never).
+  size_t changes_ = 0;
+  size_t saved_changes_ = static_cast<size_t>(-1);
   ros::Time last_stamp_;
-  size_t frames_fused_ = 0, dropped_no_tf_ = 0;
+  ros::Time last_stamp_seen_;  // of the last depth frame received (for error logs)
+  size_t frames_fused_ = 0;
+  std::atomic<size_t> dropped_no_tf_{0}, depth_errors_{0}, service_errors_{0}, timer_errors_{0};
+  std::atomic<size_t> time_resets_{0}, saves_ok_{0}, saves_failed_{0};
+  std::mutex error_mutex_;  // after mutex_ when both are taken
+  std::string last_error_, last_save_error_;
   bool cleared_ = false;
   mutable std::unordered_map<BlockIndex, int, BlockIndexHash> marker_ids_;  // block -> marker id
   std::unordered_set<int> shown_;  // marker ids added and not deleted since

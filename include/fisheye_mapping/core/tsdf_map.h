@@ -3,13 +3,18 @@
 // band, integrated with the fisheye camera model, and kept as a local map: the
 // blocks inside a box around the vehicle are active, the others are swapped out
 // to a store in host memory (or on disk) and swapped back when needed. Nothing
-// fused is lost by swapping.
+// fused is lost by swapping, unless a swap file is deleted or damaged behind
+// the map's back: that block is then dropped ("lost"), counted and reported
+// once through the swap-error callback, and the map goes on without it. A swap
+// file that cannot be written keeps its block in RAM (counted, reported).
 //
 // Not thread-safe: call from one thread (integration itself uses all cores).
 #ifndef FISHEYE_MAPPING_CORE_TSDF_MAP_H_
 #define FISHEYE_MAPPING_CORE_TSDF_MAP_H_
 
 #include <array>
+#include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <unordered_map>
@@ -71,7 +76,31 @@ struct IntegrationStats {
   double allocation_ms = 0;   // rays -> touched blocks, allocation, swap-in
   double integration_ms = 0;  // voxel updates
   double local_map_ms = 0;    // swap-out / swap-in as the box moves
+  size_t blocks_lost = 0;     // swapped blocks whose file could not be read back (dropped)
 };
+
+// Map file (see tsdf_io.cpp for the layout). Version 2 (written now) carries
+// max_weight, a CRC32 of the header and one per block; version 1 (no
+// checksums) is still read.
+struct MapFileInfo {
+  uint32_t version = 0;
+  double voxel_size = 0, truncation_voxels = 0;
+  float max_weight = 0;  // 0: not stored (version 1)
+  uint64_t num_blocks = 0;
+  uint64_t file_size = 0;
+};
+
+struct MapSaveOptions {
+  // Keep an existing file at the path as <path>.1 (replacing an older .1).
+  bool keep_previous = false;
+  // Refuse (throw, nothing written) to replace a file holding blocks (or one
+  // that is not a readable map) by a map with no blocks.
+  bool refuse_empty_overwrite = false;
+};
+
+// CRC-32 (IEEE 802.3, zlib's crc32): crc32("123456789") == 0xCBF43926.
+// Chain by passing the previous value as `crc`.
+uint32_t crc32(const void* data, size_t size, uint32_t crc = 0);
 
 class TsdfMap {
  public:
@@ -98,7 +127,9 @@ class TsdfMap {
   // Voxel at a global voxel index from either store, or nullptr.
   const FmVoxel* voxel(const Eigen::Vector3i& global_voxel) const;
   // Block from either store (a swapped block on disk is read into a cache
-  // owned by the map), or nullptr.
+  // owned by the map), or nullptr. A disk-swapped block whose file cannot be
+  // read (missing, short, checksum) is dropped from the map and reported as
+  // lost; nullptr then. Never throws for swap I/O.
   const VoxelBlock* block(const BlockIndex& index) const;
   bool isActive(const BlockIndex& index) const { return active_.count(index) > 0; }
   // Frees the copies of disk-swapped blocks that block() read.
@@ -114,11 +145,32 @@ class TsdfMap {
   // Blocks whose voxels changed since the last call (for incremental meshing).
   BlockSet takeChangedBlocks();
 
-  // Whole map (both stores) to a binary file and back, bit-identical. load
-  // replaces the map's contents; the file's voxel size and truncation must
-  // match the config. Throw std::runtime_error naming the file on failure.
-  void save(const std::string& path) const;
+  // Swap I/O faults. Lost blocks: swapped blocks whose file could not be read
+  // back, dropped from the map (each reported once, with its path). Swap write
+  // failures: blocks kept in RAM because their file could not be written.
+  // `lost`: true for a lost block (once per block), false for a failed write
+  // (each time the block leaves the local map again).
+  using SwapErrorCallback = std::function<void(bool lost, const std::string& message)>;
+  // Default: one line on stderr per event.
+  void setSwapErrorCallback(SwapErrorCallback cb) { swap_error_cb_ = std::move(cb); }
+  size_t numLostBlocks() const { return lost_blocks_; }
+  size_t numSwapWriteFailures() const { return swap_write_failures_; }
+
+  // Whole map (both stores) to a binary file (format version 2) and back,
+  // bit-identical. save writes <path>.tmp, syncs it and renames it over path;
+  // on any failure (path a directory, unwritable, disk full) it throws
+  // std::runtime_error naming the path and leaves no .tmp behind.
+  void save(const std::string& path, const MapSaveOptions& options = MapSaveOptions()) const;
+  // Replaces the map's contents with the file's, only once the whole file is
+  // read and valid: header (and its CRC), block count against the file size,
+  // each block's CRC, every voxel finite with |tsdf| <= 1 and 0 <= weight <=
+  // max_weight (the file's; the config's for version 1), block indices within
+  // 1e5 m of the origin, no duplicate blocks; the file's voxel size and
+  // truncation must match the config. Throws std::runtime_error naming the
+  // file (and the block) otherwise; the map is then unchanged.
   void load(const std::string& path);
+  // The header of a map file (std::runtime_error if it is none).
+  static MapFileInfo readHeader(const std::string& path);
   void clear();
 
   Eigen::Vector3d voxelCenter(const Eigen::Vector3i& global_voxel) const {
@@ -131,17 +183,27 @@ class TsdfMap {
                     const FmCameraT<float>& cam, const float T_C_W[12], std::vector<char>* changed) const;
   const RayTable& raysFor(const CameraModel& camera);
   void swapOut(const BlockIndex& index);
+  // nullptr when absent, or when its swap file is unreadable (then lost).
   std::unique_ptr<VoxelBlock> takeSwapped(const BlockIndex& index);
   std::string swapPath(const BlockIndex& index) const;
+  // Reads a disk-swapped block; false with the reason when it cannot.
+  bool readSwapFile(const BlockIndex& index, VoxelBlock* out, std::string* why) const;
+  void markLost(const BlockIndex& index, const std::string& why) const;
+  void reportSwapError(bool lost, const std::string& message) const;
 
   TsdfConfig config_;
   Eigen::Vector3d local_center_ = Eigen::Vector3d::Zero();
   bool has_local_center_ = false;
   std::unordered_map<BlockIndex, std::unique_ptr<VoxelBlock>, BlockIndexHash> active_;
   // Swapped-out blocks: in memory, or (swap_directory set) nullptr + a file.
-  std::unordered_map<BlockIndex, std::unique_ptr<VoxelBlock>, BlockIndexHash> swapped_;
+  // Mutable: a block whose file turns out unreadable is dropped, even by a
+  // const read.
+  mutable std::unordered_map<BlockIndex, std::unique_ptr<VoxelBlock>, BlockIndexHash> swapped_;
   mutable std::unordered_map<BlockIndex, std::unique_ptr<VoxelBlock>, BlockIndexHash> disk_cache_;
-  BlockSet changed_;
+  mutable BlockSet changed_;
+  mutable size_t lost_blocks_ = 0;
+  size_t swap_write_failures_ = 0;
+  SwapErrorCallback swap_error_cb_;
   std::vector<std::unique_ptr<RayTable>> ray_tables_;
   std::unique_ptr<class TsdfIntegratorCl> opencl_;
 };

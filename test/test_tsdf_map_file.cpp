@@ -1,0 +1,670 @@
+// Integrity of the TSDF map's files and swap store: every kind of damaged map
+// file is rejected with a message naming the fault (and the block) while the
+// live map stays as it was; saves are atomic and leave nothing behind on
+// failure; swap files deleted, damaged or unwritable lose at most their own
+// block, never the process; map_tool reads the same files. The truths are the
+// documented file layout (written and patched here byte by byte) and
+// snapshots of the map taken before each fault.
+#include <signal.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <random>
+#include <set>
+#include <tuple>
+
+#include <gtest/gtest.h>
+
+#include "fisheye_mapping/core/analytic_scene.h"
+#include "fisheye_mapping/core/tsdf_map.h"
+#include "test_utils.h"
+
+namespace fisheye_mapping {
+namespace {
+
+namespace fs = std::filesystem;
+using analytic::lookAt;
+using analytic::Scene;
+
+// Layout of version 2 (see tsdf_io.cpp), written out independently here.
+constexpr size_t kHeader = 44, kRecord = 4112, kPayload = 4108;
+constexpr size_t kHeaderV1 = 36, kRecordV1 = 4108;
+
+CameraModel smallFisheye() {
+  return CameraModel::unified(test::makeIntrinsics(130, 130, 127.5, 67.5, 256, 136), 0.98, -0.02, 0.004, 2e-4,
+                              -1e-4);
+}
+
+Scene street() {
+  Scene s;
+  s.boxes.push_back({Eigen::Vector3d(-1e3, 6, 0), Eigen::Vector3d(1e4, 7, 8)});
+  s.boxes.push_back({Eigen::Vector3d(-1e3, -7, 0), Eigen::Vector3d(1e4, -6, 8)});
+  s.min_incidence_cos = 0.2;
+  return s;
+}
+
+Eigen::Isometry3d carCamera(double x) { return lookAt(Eigen::Vector3d(x, 0, 1.6), Eigen::Vector3d(x + 10, 0, 0.6)); }
+
+TsdfConfig smallLocalMap(const std::string& swap_dir = "") {
+  TsdfConfig cfg;
+  cfg.voxel_size = 0.1;
+  cfg.local_map_size = Eigen::Vector3d(20, 20, 3);
+  cfg.swap_directory = swap_dir;
+  return cfg;
+}
+
+void drive(TsdfMap* map, double from, double to, double step) {
+  const CameraModel cam = smallFisheye();
+  const Scene s = street();
+  for (double x = from; step > 0 ? x <= to : x >= to; x += step) {
+    map->integrate(s.render(cam, carCamera(x)), cam, carCamera(x), Eigen::Vector3d(x, 0, 0));
+  }
+}
+
+using Snapshot = std::map<std::tuple<int, int, int>, VoxelBlock>;
+
+Snapshot snapshot(const TsdfMap& map) {
+  Snapshot out;
+  for (const BlockIndex& b : map.allBlocks()) {
+    const VoxelBlock* blk = map.block(b);
+    if (blk) out[{b.x(), b.y(), b.z()}] = *blk;
+  }
+  return out;
+}
+
+// The map holds exactly the snapshot's blocks, bit for bit.
+::testing::AssertionResult sameAs(const TsdfMap& map, const Snapshot& snap) {
+  if (map.numBlocks() != snap.size()) {
+    return ::testing::AssertionFailure() << map.numBlocks() << " blocks, expected " << snap.size();
+  }
+  for (const auto& kv : snap) {
+    const auto& [x, y, z] = kv.first;
+    const VoxelBlock* b = map.block(BlockIndex(x, y, z));
+    if (!b) return ::testing::AssertionFailure() << "block " << x << " " << y << " " << z << " missing";
+    if (std::memcmp(b->voxels.data(), kv.second.voxels.data(), sizeof(b->voxels)) != 0) {
+      return ::testing::AssertionFailure() << "block " << x << " " << y << " " << z << " differs";
+    }
+  }
+  return ::testing::AssertionSuccess();
+}
+
+std::string tempDir() {
+  char tmpl[] = "/tmp/fm_map_file_test_XXXXXX";
+  return mkdtemp(tmpl);
+}
+
+std::string readBytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+
+void writeBytes(const std::string& path, const std::string& bytes) {
+  std::ofstream(path, std::ios::binary | std::ios::trunc) << bytes;
+}
+
+template <typename T>
+void put(std::string* bytes, size_t at, T v) {
+  std::memcpy(&(*bytes)[at], &v, sizeof(T));
+}
+template <typename T>
+T get(const std::string& bytes, size_t at) {
+  T v;
+  std::memcpy(&v, &bytes[at], sizeof(T));
+  return v;
+}
+
+void fixHeaderCrc(std::string* b) { put<uint32_t>(b, 40, crc32(b->data(), 40)); }
+void fixBlockCrc(std::string* b, size_t i) {
+  const size_t at = kHeader + i * kRecord;
+  put<uint32_t>(b, at + kPayload, crc32(b->data() + at, kPayload));
+}
+size_t voxelAt(size_t block, int voxel) { return kHeader + block * kRecord + 12 + 8 * voxel; }
+std::string blockName(const std::string& bytes, size_t i) {
+  const size_t at = kHeader + i * kRecord;
+  return "block #" + std::to_string(i) + " (" + std::to_string(get<int32_t>(bytes, at)) + ", " +
+         std::to_string(get<int32_t>(bytes, at + 4)) + ", " + std::to_string(get<int32_t>(bytes, at + 8)) + ")";
+}
+
+TEST(Crc32, KnownValues) {
+  EXPECT_EQ(crc32("123456789", 9), 0xCBF43926u);  // the standard check value
+  EXPECT_EQ(crc32("", 0), 0u);
+  EXPECT_EQ(crc32("The quick brown fox jumps over the lazy dog", 43), 0x414FA339u);
+  EXPECT_EQ(crc32("6789", 4, crc32("12345", 5)), 0xCBF43926u);  // chained
+}
+
+// One map (both stores) and its file, shared by the file tests.
+class MapFile : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = new std::string(tempDir());
+    map_ = new TsdfMap(smallLocalMap());
+    drive(map_, 0, 28, 4.0);
+    snap_ = new Snapshot(snapshot(*map_));
+    map_->save(*dir_ + "/good.fmtsdf");
+    good_ = new std::string(readBytes(*dir_ + "/good.fmtsdf"));
+  }
+  static void TearDownTestSuite() {
+    fs::remove_all(*dir_);
+    delete map_;
+    delete snap_;
+    delete good_;
+    delete dir_;
+  }
+  // A live map loaded from the good file: a bad file must leave it as it is.
+  void SetUp() override {
+    live_ = std::make_unique<TsdfMap>(smallLocalMap());
+    live_->load(*dir_ + "/good.fmtsdf");
+    ASSERT_TRUE(sameAs(*live_, *snap_));
+  }
+  // Loading `bytes` fails with a message holding each of `expected`; the live
+  // map is unchanged.
+  void expectRejected(const std::string& bytes, const std::vector<std::string>& expected) {
+    const std::string path = *dir_ + "/bad.fmtsdf";
+    writeBytes(path, bytes);
+    try {
+      live_->load(path);
+      ADD_FAILURE() << "a damaged file was loaded";
+    } catch (const std::runtime_error& e) {
+      const std::string msg = e.what();
+      EXPECT_NE(msg.find(path), std::string::npos) << msg;
+      for (const auto& s : expected) EXPECT_NE(msg.find(s), std::string::npos) << "'" << s << "' not in: " << msg;
+    }
+    EXPECT_TRUE(sameAs(*live_, *snap_)) << "the live map changed";
+  }
+  size_t numBlocks() const { return snap_->size(); }
+
+  static std::string* dir_;
+  static TsdfMap* map_;
+  static Snapshot* snap_;
+  static std::string* good_;
+  std::unique_ptr<TsdfMap> live_;
+};
+std::string* MapFile::dir_ = nullptr;
+TsdfMap* MapFile::map_ = nullptr;
+Snapshot* MapFile::snap_ = nullptr;
+std::string* MapFile::good_ = nullptr;
+
+TEST_F(MapFile, LayoutAndRoundTrip) {
+  ASSERT_GT(map_->numSwappedBlocks(), 0u);  // both stores are saved
+  ASSERT_GT(numBlocks(), 500u);
+  const std::string& b = *good_;
+  EXPECT_EQ(b.size(), kHeader + numBlocks() * kRecord);
+  EXPECT_EQ(b.substr(0, 8), "FMTSDF01");
+  EXPECT_EQ(get<uint32_t>(b, 8), 2u);
+  EXPECT_EQ(get<double>(b, 12), 0.1);
+  EXPECT_EQ(get<double>(b, 20), 4.0);
+  EXPECT_EQ(get<uint64_t>(b, 28), numBlocks());
+  EXPECT_EQ(get<float>(b, 36), 100.0f);
+  EXPECT_EQ(get<uint32_t>(b, 40), crc32(b.data(), 40));
+  for (size_t i = 0; i < numBlocks(); ++i) {
+    ASSERT_EQ(get<uint32_t>(b, kHeader + i * kRecord + kPayload), crc32(b.data() + kHeader + i * kRecord, kPayload));
+  }
+  const MapFileInfo info = TsdfMap::readHeader(*dir_ + "/good.fmtsdf");
+  EXPECT_EQ(info.version, 2u);
+  EXPECT_EQ(info.num_blocks, numBlocks());
+  EXPECT_EQ(info.file_size, b.size());
+  // Saved again, the same bytes (block order aside, the same records).
+  map_->save(*dir_ + "/again.fmtsdf");
+  EXPECT_EQ(readBytes(*dir_ + "/again.fmtsdf").size(), b.size());
+  TsdfMap again(smallLocalMap());
+  again.load(*dir_ + "/again.fmtsdf");
+  EXPECT_TRUE(sameAs(again, *snap_));
+  EXPECT_FALSE(fs::exists(*dir_ + "/again.fmtsdf.tmp"));
+}
+
+TEST_F(MapFile, BlockCountZeroIsRejected) {
+  std::string b = *good_;
+  put<uint64_t>(&b, 28, 0);
+  expectRejected(b, {"header checksum mismatch"});  // as a hostile edit leaves it
+  fixHeaderCrc(&b);
+  expectRejected(b, {"header counts 0 blocks"});  // even with a consistent header
+}
+
+TEST_F(MapFile, BlockCountSmallerThanTheBlocksPresentIsRejected) {
+  std::string b = *good_;
+  put<uint64_t>(&b, 28, 10);
+  expectRejected(b, {"header checksum mismatch"});
+  fixHeaderCrc(&b);
+  expectRejected(b, {"header counts 10 blocks"});
+  put<uint64_t>(&b, 28, numBlocks() + 1);
+  fixHeaderCrc(&b);
+  expectRejected(b, {"truncated map file"});
+}
+
+TEST_F(MapFile, BitFlipsInThePayloadFailTheChecksumNamingTheBlock) {
+  // 5000 random bit flips after the header.
+  std::string b = *good_;
+  std::mt19937 rng(15);
+  std::uniform_int_distribution<size_t> byte(kHeader, b.size() - 1);
+  std::set<size_t> blocks;
+  for (int i = 0; i < 5000; ++i) {
+    const size_t at = byte(rng);
+    b[at] = static_cast<char>(b[at] ^ (1 << (rng() % 8)));
+    blocks.insert((at - kHeader) / kRecord);
+  }
+  expectRejected(b, {"checksum mismatch", blockName(b, *blocks.begin())});
+  // One flipped bit in one voxel of block 7: that block is named.
+  b = *good_;
+  b[voxelAt(7, 300) + 2] ^= 0x10;
+  expectRejected(b, {blockName(b, 7) + ": checksum mismatch"});
+}
+
+TEST_F(MapFile, NonFiniteAndOutOfRangeVoxelsAreRejected) {
+  struct Case {
+    const char* name;
+    int field;  // 0 tsdf, 1 weight
+    float value;
+  };
+  const Case cases[] = {{"NaN tsdf", 0, NAN},        {"inf tsdf", 0, INFINITY},  {"tsdf 1.5", 0, 1.5f},
+                        {"tsdf -3", 0, -3.0f},       {"NaN weight", 1, NAN},     {"negative weight", 1, -1.0f},
+                        {"inf weight", 1, INFINITY}, {"weight above the cap", 1, 250.0f}};
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    std::string b = *good_;
+    put<float>(&b, voxelAt(3, 77) + 4 * c.field, c.value);
+    fixBlockCrc(&b, 3);  // a consistent checksum: the values themselves are checked
+    expectRejected(b, {blockName(b, 3) + ", voxel 77"});
+  }
+}
+
+TEST_F(MapFile, GarbageBlockIndicesAreRejected) {
+  std::string b = *good_;
+  put<int32_t>(&b, kHeader + 5 * kRecord, 125000000);  // 1e8 m with 0.8 m blocks
+  fixBlockCrc(&b, 5);
+  expectRejected(b, {blockName(b, 5), "garbage index"});
+  b = *good_;
+  put<int32_t>(&b, kHeader + 5 * kRecord + 8, -2147483647 - 1);
+  fixBlockCrc(&b, 5);
+  expectRejected(b, {"garbage index"});
+}
+
+TEST_F(MapFile, DuplicateBlocksAreRejected) {
+  std::string b = *good_;
+  std::memcpy(&b[kHeader + 9 * kRecord], &b[kHeader + 2 * kRecord], kRecord);  // block 2's record again as 9
+  expectRejected(b, {blockName(b, 9) + ": duplicate of block #2"});
+}
+
+TEST_F(MapFile, TruncatedAndExtendedFilesAreRejected) {
+  expectRejected(good_->substr(0, good_->size() / 2), {"truncated map file"});
+  expectRejected(good_->substr(0, good_->size() - 1), {"truncated map file"});
+  expectRejected(good_->substr(0, 40), {"bad header"});
+  expectRejected(*good_ + std::string(100, '\0'), {"bytes appended"});
+  expectRejected("not a map", {"bad header"});
+  std::string b = *good_;
+  put<uint32_t>(&b, 8, 3);
+  fixHeaderCrc(&b);
+  expectRejected(b, {"unknown version 3"});
+}
+
+TEST_F(MapFile, DirectoriesAndMissingFilesAreRejected) {
+  EXPECT_THROW(live_->load(*dir_), std::runtime_error);
+  EXPECT_THROW(live_->load(*dir_ + "/missing.fmtsdf"), std::runtime_error);
+  EXPECT_TRUE(sameAs(*live_, *snap_));
+}
+
+// A version-1 file (no checksums), written here from the snapshot.
+std::string versionOneFile(const Snapshot& snap) {
+  std::string b(kHeaderV1, '\0');
+  std::memcpy(&b[0], "FMTSDF01", 8);
+  put<uint32_t>(&b, 8, 1);
+  put<double>(&b, 12, 0.1);
+  put<double>(&b, 20, 4.0);
+  put<uint64_t>(&b, 28, snap.size());
+  for (const auto& kv : snap) {
+    const auto& [x, y, z] = kv.first;
+    const int32_t idx[3] = {x, y, z};
+    b.append(reinterpret_cast<const char*>(idx), sizeof(idx));
+    b.append(reinterpret_cast<const char*>(kv.second.voxels.data()), sizeof(kv.second.voxels));
+  }
+  return b;
+}
+
+TEST_F(MapFile, VersionOneFilesAreReadAndChecked) {
+  const std::string v1 = versionOneFile(*snap_);
+  ASSERT_EQ(v1.size(), kHeaderV1 + numBlocks() * kRecordV1);
+  writeBytes(*dir_ + "/v1.fmtsdf", v1);
+  TsdfMap m(smallLocalMap());
+  m.load(*dir_ + "/v1.fmtsdf");
+  EXPECT_TRUE(sameAs(m, *snap_));
+  EXPECT_EQ(TsdfMap::readHeader(*dir_ + "/v1.fmtsdf").version, 1u);
+  std::string b = v1;
+  put<uint64_t>(&b, 28, 0);
+  expectRejected(b, {"header counts 0 blocks"});
+  put<uint64_t>(&b, 28, 10);
+  expectRejected(b, {"header counts 10 blocks"});
+  b = v1;
+  put<float>(&b, kHeaderV1 + 4 * kRecordV1 + 12 + 8 * 5, NAN);
+  expectRejected(b, {"block #4", "voxel 5"});
+  b = v1;
+  put<float>(&b, kHeaderV1 + 4 * kRecordV1 + 12 + 8 * 5 + 4, -2.0f);
+  expectRejected(b, {"block #4", "voxel 5"});
+}
+
+// Names in a directory.
+std::set<std::string> listing(const std::string& dir) {
+  std::set<std::string> out;
+  for (const auto& e : fs::directory_iterator(dir)) out.insert(e.path().filename().string());
+  return out;
+}
+
+TEST_F(MapFile, FailedSavesLeaveNothingBehind) {
+  const std::string d = tempDir();
+  fs::create_directory(d + "/sub");
+  try {
+    map_->save(d + "/sub");
+    ADD_FAILURE() << "saved onto a directory";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("is a directory"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(listing(d), std::set<std::string>{"sub"});
+  EXPECT_TRUE(fs::is_empty(d + "/sub"));
+  EXPECT_THROW(map_->save(d + "/no/such/dir/map.fmtsdf"), std::runtime_error);
+  EXPECT_THROW(map_->save(""), std::runtime_error);
+  EXPECT_EQ(listing(d), std::set<std::string>{"sub"});
+
+  // The disk fills up mid-save (a file size limit of 64 kB): the old map
+  // stays, no .tmp is left.
+  writeBytes(d + "/map.fmtsdf", *good_);
+  struct rlimit old_limit;
+  ASSERT_EQ(getrlimit(RLIMIT_FSIZE, &old_limit), 0);
+  struct rlimit small = old_limit;
+  small.rlim_cur = 64 * 1024;
+  signal(SIGXFSZ, SIG_IGN);  // write() then fails with EFBIG
+  ASSERT_EQ(setrlimit(RLIMIT_FSIZE, &small), 0);
+  bool threw = false;
+  std::string msg;
+  try {
+    map_->save(d + "/map.fmtsdf");
+  } catch (const std::runtime_error& e) {
+    threw = true;
+    msg = e.what();
+  }
+  setrlimit(RLIMIT_FSIZE, &old_limit);
+  signal(SIGXFSZ, SIG_DFL);
+  EXPECT_TRUE(threw);
+  EXPECT_NE(msg.find("write failed"), std::string::npos) << msg;
+  EXPECT_EQ(listing(d), (std::set<std::string>{"map.fmtsdf", "sub"}));
+  EXPECT_EQ(readBytes(d + "/map.fmtsdf"), *good_);
+  fs::remove_all(d);
+}
+
+TEST_F(MapFile, EmptyMapNeverReplacesAMapWhenRefusedAndThePreviousIsKept) {
+  const std::string d = tempDir();
+  const std::string p = d + "/map.fmtsdf";
+  writeBytes(p, *good_);
+  MapSaveOptions safe;
+  safe.refuse_empty_overwrite = true;
+  safe.keep_previous = true;
+  TsdfMap empty(smallLocalMap());
+  try {
+    empty.save(p, safe);
+    ADD_FAILURE() << "an empty map replaced a non-empty one";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("refusing"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(readBytes(p), *good_);
+  EXPECT_EQ(listing(d), std::set<std::string>{"map.fmtsdf"});
+  // Nor over a file that is not a readable map (it may be a damaged good one).
+  writeBytes(d + "/junk.fmtsdf", "junk");
+  EXPECT_THROW(empty.save(d + "/junk.fmtsdf", safe), std::runtime_error);
+  EXPECT_EQ(readBytes(d + "/junk.fmtsdf"), "junk");
+  // An empty map over an empty map, or where no file is: fine.
+  empty.save(d + "/empty.fmtsdf", safe);
+  empty.save(d + "/empty.fmtsdf", safe);
+  EXPECT_EQ(TsdfMap::readHeader(d + "/empty.fmtsdf").num_blocks, 0u);
+  EXPECT_EQ(fs::file_size(d + "/empty.fmtsdf"), kHeader);
+  // An explicit save (no refusal) of an empty map is the user's choice.
+  empty.save(d + "/junk.fmtsdf");
+  EXPECT_EQ(fs::file_size(d + "/junk.fmtsdf"), kHeader);
+
+  // keep_previous: the old file becomes <path>.1, byte for byte.
+  TsdfMap other(smallLocalMap());
+  drive(&other, 0, 8, 4.0);
+  other.save(p, safe);
+  EXPECT_EQ(readBytes(p + ".1"), *good_);
+  TsdfMap back(smallLocalMap());
+  back.load(p);
+  EXPECT_TRUE(sameAs(back, snapshot(other)));
+  EXPECT_FALSE(fs::exists(p + ".tmp"));
+  fs::remove_all(d);
+}
+
+// --- Swap store faults -------------------------------------------------------
+
+struct SwapFault : public ::testing::Test {
+  void SetUp() override {
+    dir = tempDir();
+    map = std::make_unique<TsdfMap>(smallLocalMap(dir + "/swap"));
+    map->setSwapErrorCallback([this](bool lost, const std::string& m) {
+      if (lost) messages.push_back(m);
+      else ++write_failures;
+    });
+    drive(map.get(), 0, 40, 4.0);
+    ASSERT_GT(map->numSwappedBlocks(), 100u);
+  }
+  void TearDown() override { fs::remove_all(dir); }
+  std::vector<std::string> swapFiles() const {
+    std::vector<std::string> out;
+    for (const auto& e : fs::directory_iterator(dir + "/swap")) out.push_back(e.path().string());
+    return out;
+  }
+  std::string dir;
+  std::unique_ptr<TsdfMap> map;
+  std::vector<std::string> messages;  // lost blocks
+  size_t write_failures = 0;
+};
+
+TEST_F(SwapFault, DeletedSwapFilesLoseOnlyTheirBlocks) {
+  const Snapshot before = snapshot(*map);
+  map->dropSwapCache();
+  const std::vector<BlockIndex> all = map->allBlocks();
+  std::vector<BlockIndex> active;
+  for (const auto& b : all) {
+    if (map->isActive(b)) active.push_back(b);
+  }
+  const std::vector<std::string> files = swapFiles();
+  ASSERT_EQ(files.size(), map->numSwappedBlocks());
+  for (const auto& f : files) fs::remove(f);
+
+  // Drive back to the start: the blocks coming back into the local map are
+  // lost, nothing throws, and fusing goes on there.
+  IntegrationStats stats;
+  EXPECT_NO_THROW(map->moveLocalMap(Eigen::Vector3d(0, 0, 0)));
+  const CameraModel cam = smallFisheye();
+  EXPECT_NO_THROW(stats = map->integrate(street().render(cam, carCamera(0)), cam, carCamera(0), Eigen::Vector3d::Zero()));
+  EXPECT_GT(stats.valid_pixels, 0u);
+  const size_t lost_on_return = map->numLostBlocks();
+  EXPECT_GT(lost_on_return, 0u);
+  // A save reads every remaining swapped block: the rest of the deleted ones
+  // are found lost there, and the file holds everything else.
+  EXPECT_NO_THROW(map->save(dir + "/map.fmtsdf"));
+  EXPECT_EQ(map->numLostBlocks(), files.size());
+  EXPECT_EQ(map->numBlocks(), all.size() - files.size() + stats.blocks_allocated);
+  // One message per lost block, naming its swap file.
+  ASSERT_EQ(messages.size(), files.size());
+  std::set<std::string> named;
+  for (const auto& m : messages) {
+    EXPECT_NE(m.find("lost"), std::string::npos) << m;
+    for (const auto& f : files) {
+      if (m.find(f + ":") != std::string::npos) named.insert(f);
+    }
+  }
+  EXPECT_EQ(named.size(), files.size());
+  // The blocks that were active when the files went (around x = 40 m, out of
+  // reach of the frame at x = 0) are intact.
+  size_t intact = 0;
+  TsdfMap reread(smallLocalMap());
+  reread.load(dir + "/map.fmtsdf");
+  EXPECT_EQ(reread.numBlocks(), map->numBlocks());
+  for (const auto& b : active) {
+    const VoxelBlock* now = reread.block(b);
+    ASSERT_NE(now, nullptr);
+    if (std::memcmp(now->voxels.data(), before.at({b.x(), b.y(), b.z()}).voxels.data(), sizeof(now->voxels)) == 0) {
+      ++intact;
+    }
+  }
+  std::cout << files.size() << " swap files deleted, " << lost_on_return << " lost on the way back, "
+            << active.size() << " active blocks kept, " << intact << " of them bit-identical\n";
+  EXPECT_EQ(intact, active.size());
+}
+
+TEST_F(SwapFault, DamagedSwapFileLosesThatBlockOnly) {
+  const Snapshot before = snapshot(*map);
+  map->dropSwapCache();
+  std::vector<BlockIndex> swapped;
+  for (const auto& b : map->allBlocks()) {
+    if (!map->isActive(b)) swapped.push_back(b);
+  }
+  const BlockIndex victim = swapped[swapped.size() / 2];
+  const std::string path = dir + "/swap/block_" + std::to_string(victim.x()) + "_" + std::to_string(victim.y()) + "_" +
+                           std::to_string(victim.z()) + ".bin";
+  std::string bytes = readBytes(path);
+  ASSERT_EQ(bytes.size(), 4100u);  // voxels + CRC-32
+  bytes[1000] ^= 0x01;
+  writeBytes(path, bytes);
+  EXPECT_EQ(map->block(victim), nullptr);
+  EXPECT_EQ(map->numLostBlocks(), 1u);
+  ASSERT_EQ(messages.size(), 1u);
+  EXPECT_NE(messages[0].find("checksum mismatch"), std::string::npos) << messages[0];
+  EXPECT_NE(messages[0].find(path), std::string::npos) << messages[0];
+  Snapshot expected = before;
+  expected.erase({victim.x(), victim.y(), victim.z()});
+  EXPECT_TRUE(sameAs(*map, expected));
+  map->dropSwapCache();  // sameAs read every block
+  // A truncated one, read on the way back in (a block near x = 0).
+  BlockIndex second = victim;
+  for (const auto& b : swapped) {
+    const Eigen::Vector3d c = (b.cast<double>() + Eigen::Vector3d::Constant(0.5)) * 0.8;
+    if (b != victim && std::abs(c.x()) < 8 && std::abs(c.y()) < 8 && std::abs(c.z() - 1.0) < 1.4) second = b;
+  }
+  ASSERT_NE(second, victim);
+  const std::string path2 = dir + "/swap/block_" + std::to_string(second.x()) + "_" + std::to_string(second.y()) +
+                            "_" + std::to_string(second.z()) + ".bin";
+  fs::resize_file(path2, 100);
+  EXPECT_NO_THROW(map->moveLocalMap(Eigen::Vector3d(0, 0, 0)));
+  EXPECT_EQ(map->numLostBlocks(), 2u);
+  EXPECT_FALSE(map->isActive(second));
+  EXPECT_NE(messages.back().find("short file"), std::string::npos) << messages.back();
+  expected.erase({second.x(), second.y(), second.z()});
+  EXPECT_TRUE(sameAs(*map, expected));
+}
+
+TEST_F(SwapFault, UnwritableSwapDirectoryKeepsBlocksInRam) {
+  const Snapshot before = snapshot(*map);
+  map->dropSwapCache();
+  std::vector<BlockIndex> active;
+  for (const auto& b : map->allBlocks()) {
+    if (map->isActive(b)) active.push_back(b);
+  }
+  const size_t swapped = map->numSwappedBlocks();
+  // The swap directory becomes a plain file (its files are gone with it).
+  fs::remove_all(dir + "/swap");
+  writeBytes(dir + "/swap", "not a directory");
+  // Driving away cannot write the active blocks out: they stay in RAM.
+  EXPECT_NO_THROW(map->moveLocalMap(Eigen::Vector3d(500, 0, 0)));
+  EXPECT_EQ(map->numSwapWriteFailures(), active.size());
+  EXPECT_EQ(write_failures, active.size());
+  EXPECT_EQ(map->numActiveBlocks(), 0u);
+  for (const auto& b : active) {
+    const VoxelBlock* blk = map->block(b);
+    ASSERT_NE(blk, nullptr);
+    ASSERT_EQ(std::memcmp(blk->voxels.data(), before.at({b.x(), b.y(), b.z()}).voxels.data(), sizeof(blk->voxels)), 0);
+  }
+  EXPECT_EQ(map->numLostBlocks(), 0u);
+  // A save keeps them; the blocks whose files went with the directory are lost.
+  EXPECT_NO_THROW(map->save(dir + "/map.fmtsdf"));
+  EXPECT_EQ(map->numLostBlocks(), swapped);
+  TsdfMap reread(smallLocalMap());
+  reread.load(dir + "/map.fmtsdf");
+  EXPECT_EQ(reread.numBlocks(), active.size());
+  // Coming back: they return from RAM.
+  EXPECT_NO_THROW(map->moveLocalMap(Eigen::Vector3d(40, 0, 0)));
+  EXPECT_EQ(map->numActiveBlocks(), active.size());
+}
+
+// --- map_tool ----------------------------------------------------------------
+
+struct ToolRun {
+  int status;
+  std::string out;
+};
+ToolRun runTool(const std::string& args) {
+  const std::string cmd = std::string(FM_MAP_TOOL) + " " + args + " 2>&1";
+  FILE* p = popen(cmd.c_str(), "r");
+  ToolRun r{-1, ""};
+  if (!p) return r;
+  char buf[4096];
+  size_t n;
+  while ((n = fread(buf, 1, sizeof(buf), p)) > 0) r.out.append(buf, n);
+  const int st = pclose(p);
+  r.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+  return r;
+}
+
+TEST_F(MapFile, MapToolReadsTheSameFiles) {
+  const std::string d = tempDir();
+  const std::string good = *dir_ + "/good.fmtsdf";
+  ToolRun r = runTool("check " + good);
+  EXPECT_EQ(r.status, 0) << r.out;
+  EXPECT_NE(r.out.find("valid: " + good + ": format version 2, " + std::to_string(numBlocks()) + " blocks"),
+            std::string::npos)
+      << r.out;
+  r = runTool("info " + good);
+  EXPECT_EQ(r.status, 0) << r.out;
+  EXPECT_NE(r.out.find("blocks (header):   " + std::to_string(numBlocks())), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("valid:             yes"), std::string::npos) << r.out;
+  r = runTool("convert " + good + " " + d + "/mesh.ply");
+  EXPECT_EQ(r.status, 0) << r.out;
+  EXPECT_EQ(readBytes(d + "/mesh.ply").substr(0, 3), "ply");
+  r = runTool("convert " + good + " " + d + "/cloud.pcd --min-observations 2");
+  EXPECT_EQ(r.status, 0) << r.out;
+  EXPECT_NE(readBytes(d + "/cloud.pcd").find("POINTS"), std::string::npos);
+  // A version-1 file too.
+  writeBytes(d + "/v1.fmtsdf", versionOneFile(*snap_));
+  EXPECT_EQ(runTool("check " + d + "/v1.fmtsdf").status, 0);
+
+  // Bad files: exit 1 with the reason.
+  std::string b = *good_;
+  b[voxelAt(7, 300) + 2] ^= 0x10;
+  writeBytes(d + "/flipped.fmtsdf", b);
+  r = runTool("check " + d + "/flipped.fmtsdf");
+  EXPECT_EQ(r.status, 1) << r.out;
+  EXPECT_NE(r.out.find(blockName(b, 7) + ": checksum mismatch"), std::string::npos) << r.out;
+  r = runTool("info " + d + "/flipped.fmtsdf");
+  EXPECT_EQ(r.status, 1) << r.out;
+  EXPECT_NE(r.out.find("valid:             no"), std::string::npos) << r.out;
+  r = runTool("convert " + d + "/flipped.fmtsdf " + d + "/bad.ply");
+  EXPECT_EQ(r.status, 1) << r.out;
+  EXPECT_FALSE(fs::exists(d + "/bad.ply"));
+  b = *good_;
+  put<float>(&b, voxelAt(3, 77), NAN);
+  fixBlockCrc(&b, 3);
+  writeBytes(d + "/nan.fmtsdf", b);
+  EXPECT_EQ(runTool("check " + d + "/nan.fmtsdf").status, 1);
+  writeBytes(d + "/cut.fmtsdf", good_->substr(0, 1000));
+  EXPECT_EQ(runTool("check " + d + "/cut.fmtsdf").status, 1);
+  EXPECT_EQ(runTool("check " + d).status, 1);
+  EXPECT_EQ(runTool("check " + d + "/missing.fmtsdf").status, 1);
+
+  // Strict arguments: exit 2.
+  for (const std::string& args :
+       {std::string(""), std::string("frobnicate " + good), std::string("check"), "check " + good + " extra",
+        "convert " + good, "convert " + good + " " + d + "/out.txt", "convert " + good + " " + good + ".ply extra",
+        "check " + good + " --max-weight abc", "check " + good + " --max-weight", "check " + good + " --bogus",
+        "info " + good + " --min-observations 2", "convert " + good + " " + d + "/m.ply --min-observations 0"}) {
+    r = runTool(args);
+    EXPECT_EQ(r.status, 2) << "map_tool " << args << ": " << r.out;
+    EXPECT_NE(r.out.find("usage:"), std::string::npos) << r.out;
+  }
+  EXPECT_EQ(runTool("--help").status, 0);
+  fs::remove_all(d);
+}
+
+}  // namespace
+}  // namespace fisheye_mapping
