@@ -4,7 +4,8 @@
 // after kill -9 never writes an empty map over the saved one; autosave keeps
 // the previous file as .1; swap files deleted under a running node lose their
 // blocks (reported in /diagnostics) but never the process; a depth stamp far
-// in the past (bag replayed) keeps the map and fusing goes on.
+// in the past (bag replayed) keeps the map and fusing goes on (or, with
+// ~clear_map_on_time_reset, starts a new map).
 #include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -365,9 +366,11 @@ TEST_F(TsdfLifecycle, DeletedSwapFilesDoNotAbortTheNode) {
   EXPECT_TRUE(cleanExit(node.signal(SIGTERM, 30.0)));
 }
 
-// save_map to a directory fails with a clear message and leaves nothing.
-TEST_F(TsdfLifecycle, SaveToADirectoryFailsCleanly) {
-  FusionProcess node("tsdf_dir", {});
+// save_map to a directory fails with a clear message, leaves nothing and is
+// counted; with ~clear_map_on_time_reset a replayed bag starts a new map.
+TEST_F(TsdfLifecycle, SaveToADirectoryFailsCleanlyAndTimeResetCanClear) {
+  FusionProcess node("tsdf_dir", {{"clear_map_on_time_reset", XmlRpc::XmlRpcValue(true)},
+                                  {"local_map_size", vec3(60, 60, 20)}});
   ASSERT_TRUE(node.waitReady(30.0));
   fs::create_directory(dir_ + "/sub");
   std::string message;
@@ -377,6 +380,19 @@ TEST_F(TsdfLifecycle, SaveToADirectoryFailsCleanly) {
   for (const auto& e : fs::directory_iterator(dir_)) entries.push_back(e.path().filename().string());
   EXPECT_EQ(entries, std::vector<std::string>{"sub"});
   EXPECT_TRUE(fs::is_empty(dir_ + "/sub"));
+  EXPECT_TRUE(waitFor([&] { return diagValue("tsdf_dir", "failed service requests") == 1; }, 5.0));
+
+  attach(node);
+  const ros::Time t0 = ros::Time::now();
+  play(0, 4, 16, t0 + ros::Duration(10.0));
+  EXPECT_EQ(fused_, 4);
+  ASSERT_TRUE(waitFor([&] { return diagValue("tsdf_dir", "blocks") > 100; }, 5.0));
+  play(0, 1, 16, t0);  // 10 s back: the map is cleared
+  EXPECT_TRUE(waitFor([&] { return diagValue("tsdf_dir", "time resets") == 1 && diagValue("tsdf_dir", "blocks") == 0; },
+                      5.0));
+  play(1, 4, 16, t0);  // and a new one fused
+  EXPECT_EQ(fused_, 4 + 3);
+  EXPECT_TRUE(waitFor([&] { return diagValue("tsdf_dir", "blocks") > 100; }, 5.0));
   EXPECT_TRUE(cleanExit(node.signal(SIGINT, 30.0)));
 }
 

@@ -391,6 +391,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     stat.add("frames dropped (no tf)", static_cast<size_t>(dropped_no_tf_));
     stat.add("exceptions in depth callbacks", static_cast<size_t>(depth_errors_));
     stat.add("exceptions in services", static_cast<size_t>(service_errors_));
+    stat.add("failed service requests", static_cast<size_t>(service_failures_));
     stat.add("exceptions in timers", static_cast<size_t>(timer_errors_));
     stat.add("lost swapped blocks", lost);
     stat.add("swap write failures", write_failures);
@@ -622,7 +623,9 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     } catch (const std::exception& e) {
       res.success = false;
       res.message = e.what();
-      NODELET_ERROR("%s %s failed: %s", what, path.c_str(), e.what());
+      ++service_failures_;
+      NODELET_ERROR("%s %s failed (last frame stamp %.3f): %s; %zu failed requests so far", what, path.c_str(),
+                    last_stamp_.toSec(), e.what(), static_cast<size_t>(service_failures_));
     } catch (...) {
       res.success = false;
       res.message = std::string(what) + " " + path + ": unknown exception";
@@ -698,7 +701,9 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
   ros::Time last_stamp_;
   ros::Time last_stamp_seen_;  // of the last depth frame received (for error logs)
   size_t frames_fused_ = 0;
-  std::atomic<size_t> dropped_no_tf_{0}, depth_errors_{0}, service_errors_{0}, timer_errors_{0};
+  // Exceptions caught per kind of callback; service_failures_: requests
+  // answered with an error (bad path, bad map file).
+  std::atomic<size_t> dropped_no_tf_{0}, depth_errors_{0}, service_errors_{0}, timer_errors_{0}, service_failures_{0};
   std::atomic<size_t> time_resets_{0}, saves_ok_{0}, saves_failed_{0};
   std::mutex error_mutex_;  // after mutex_ when both are taken
   std::string last_error_, last_save_error_;
