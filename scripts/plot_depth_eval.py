@@ -17,10 +17,11 @@ def main(csv_path, out_dir):
     figures = {
         "fig3_scales.png": (["full resolution", "half resolution", "multi-scale"], "median_m",
                             "Median absolute depth error per frame (no filters)"),
-        "fig5_filters.png": (["multi-scale", "multi-scale + cost filter", "+ uniqueness filter", "+ consistency filter"],
+        "fig5_filters.png": (["multi-scale", "multi-scale + cost filter", "+ uniqueness filter", "+ consistency filter",
+                              "+ texture filter"],
                              "median_m", "Median absolute error after each filter"),
         "fig5_filters_mean.png": (["multi-scale", "multi-scale + cost filter", "+ uniqueness filter",
-                                   "+ consistency filter"], "mean_m", "Mean absolute error after each filter"),
+                                   "+ consistency filter", "+ texture filter"], "mean_m", "Mean absolute error after each filter"),
         "fig6_cameras.png": (["3 outer cameras", "3 central cameras", "5 cameras"], "median_m",
                              "Median absolute error by camera set (multi-scale, filtered)"),
     }

@@ -49,9 +49,9 @@ struct DepthFilterConfig {
   // Texture: drop pixels with too little texture to correlate: the matching
   // window's standard deviation is below min_texture_snr times the image's
   // sensor noise (estimated per frame and scale from the image itself, at
-  // least min_noise_std), or the pixel lies in a textureless region reaching
-  // the top of the image (sky: see texturelessRegions), where windows
-  // reaching across the region's edge would match the edge.
+  // least min_noise_std), or the pixel lies in a textureless region (sky,
+  // blank walls: see texturelessRegions), where windows reaching across the
+  // region's edge would match the edge.
   bool texture = true;
   double min_texture_snr = 1.5;
   double min_noise_std = 1.0 / 255.0;  // image values in [0, 1]: one 8-bit step
@@ -159,15 +159,15 @@ cv::Mat applyDepthFilters(const DepthFilterConfig& config, const cv::Mat& raw, c
 // every pixel when empty). Returns 0 when there are no such pixels.
 double estimateNoiseStd(const cv::Mat& image, const cv::Mat& valid = cv::Mat());
 
-// Textureless regions of a grey float image that reach the top edge of its
-// valid area (the sky, and blank walls that touch it): connected
-// (4-neighbour) areas of valid pixels whose 3x3 standard deviation is below
-// min_snr times the image's noise (estimateNoiseStd, at least min_noise_std),
-// each at least 0.2 % of the valid pixels and centred in the upper half of
-// the image, grown by 2 pixels. CV_8UC1, 255
-// inside. (Textured surfaces such as a road can be flat at 3x3 too, hence
-// only regions reaching the top.)
-cv::Mat texturelessRegions(const cv::Mat& image, const cv::Mat& valid, double min_snr, double min_noise_std);
+// Textureless regions of a grey float image (the sky, blank walls):
+// connected (4-neighbour) areas of valid pixels whose 3x3 standard deviation
+// is below min_snr times the image's noise (estimateNoiseStd, at least
+// min_noise_std) and three quarters of whose `window` x `window` windows are below it
+// too (a road can be flat at 3x3 while its texture shows at the matching
+// window's scale), each at least 0.2 % of the valid pixels, grown by 2
+// pixels. CV_8UC1, 255 inside.
+cv::Mat texturelessRegions(const cv::Mat& image, const cv::Mat& valid, double min_snr, double min_noise_std,
+                           int window);
 
 // Which supporting views are worth matching (see PlaneSweepConfig). Returns
 // their indices; *reasons gets "<name>: why" for the dropped ones.
