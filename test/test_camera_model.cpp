@@ -2,6 +2,8 @@
 // over the whole valid field of view.
 #include <cmath>
 
+#include <functional>
+
 #include <gtest/gtest.h>
 
 #include "fisheye_mapping/core/camera_model.h"
@@ -175,6 +177,59 @@ TEST(CameraModel, RejectsBadParameters) {
     FAIL();
   } catch (const std::invalid_argument& e) {
     EXPECT_NE(std::string(e.what()).find("fy"), std::string::npos) << e.what();
+  }
+}
+
+TEST(CameraModel, RejectsAbsurdParametersNamingThem) {
+  const auto error = [](const std::function<void()>& f) -> std::string {
+    try {
+      f();
+    } catch (const std::invalid_argument& e) {
+      return e.what();
+    }
+    return "(accepted)";
+  };
+  EXPECT_EQ(error([] { CameraModel::unified(makeIntrinsics(1e300, 300, 512, 272), 1.0); }),
+            "fx must lie in (0, 1e+06] pixels, got 1e+300");
+  EXPECT_EQ(error([] { CameraModel::pinhole(makeIntrinsics(300, 2e6, 512, 272)); }),
+            "fy must lie in (0, 1e+06] pixels, got 2e+06");
+  EXPECT_EQ(error([] { CameraModel::pinhole(makeIntrinsics(300, 300, 512, 272, 100000, 100000)); }),
+            "resolution must be at most 20000x20000 pixels, got 100000x100000");
+  EXPECT_EQ(error([] { CameraModel::pinhole(makeIntrinsics(300, 300, -1e9, 272)); }),
+            "cx must lie in [-1e+06, 1e+06], got -1e+09");
+  EXPECT_EQ(error([] { CameraModel::pinhole(makeIntrinsics(300, 300, 512, 272), 5e3); }),
+            "k1 must lie in [-1000, 1000], got 5000");
+  EXPECT_EQ(error([] { CameraModel::kannalaBrandt(makeIntrinsics(300, 300, 512, 272), 0, 0, 0, -1e7); }),
+            "k4 must lie in [-1000, 1000], got -1e+07");
+  EXPECT_EQ(error([] { CameraModel::unified(makeIntrinsics(300, 300, 512, 272), 1e4); }),
+            "xi must be at most 1000, got 10000");
+  // The limits themselves are cameras.
+  EXPECT_NO_THROW(CameraModel::pinhole(makeIntrinsics(1e6, 1e6, 0, 0, 20000, 20000)));
+  const auto cam = CameraModel::unified(makeIntrinsics(300, 300, 512, 272), 1.0);
+  EXPECT_THROW(cam.scaled(100.0, 102400, 54400), std::invalid_argument);
+}
+
+TEST(CameraModel, NonFiniteAndHugePointsDoNotProject) {
+  // 1e155 squared overflows: the old code divided by infinity and returned the
+  // principal point as a valid pixel.
+  for (const auto& [name, cam] : test::realisticCameras()) {
+    SCOPED_TRACE(name);
+    Eigen::Vector2d uv;
+    EXPECT_FALSE(cam.project({1e155, 1e155, 1e155}, &uv));
+    EXPECT_FALSE(cam.project({0, 0, 1e31}, &uv));
+    EXPECT_FALSE(cam.project({NAN, 0, 1}, &uv));
+    EXPECT_FALSE(cam.project({0, INFINITY, 1}, &uv));
+    EXPECT_FALSE(cam.project({0, 0, 0}, &uv));
+    // Far but sane, and tiny: the same pixel as at 1 m (the models depend on the direction).
+    Eigen::Vector2d near, far, tiny;
+    ASSERT_TRUE(cam.project({0.1, -0.05, 1.0}, &near));
+    ASSERT_TRUE(cam.project({0.1e20, -0.05e20, 1.0e20}, &far));
+    ASSERT_TRUE(cam.project({0.1e-200, -0.05e-200, 1.0e-200}, &tiny));
+    EXPECT_LT((near - far).norm(), 1e-9);
+    EXPECT_LT((near - tiny).norm(), 1e-9);
+    Eigen::Vector3d ray;
+    EXPECT_FALSE(cam.unproject({NAN, 1}, &ray));
+    EXPECT_FALSE(cam.unproject({1, INFINITY}, &ray));
   }
 }
 

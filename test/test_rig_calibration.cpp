@@ -3,6 +3,7 @@
 // table of bad files with their specific errors.
 #include <cstdio>
 #include <fstream>
+#include <functional>
 #include <string>
 
 #include <gtest/gtest.h>
@@ -310,6 +311,37 @@ TEST_F(RigCalibration, BadFilesGiveSpecificErrors) {
        "mount.yaml: T_base_cam0: last row must be [0, 0, 0, 1]"},
       {"frame id of an unknown camera", "", "", "cam4: side_optical", "cam9: side_optical",
        "mount.yaml: frame_ids.cam9: no such camera"},
+      // Hostile files (issue 15): each is refused with the file and the field.
+      {"camera key beyond int range", "cam2:", "cam2147483648:", "", "",
+       "camchain.yaml: cam2147483648: camera index out of range: a rig has at most 64 cameras (cam0 ... cam63)"},
+      {"camera key beyond the rig limit", "cam2:", "cam64:", "", "",
+       "camchain.yaml: cam64: camera index out of range"},
+      {"camera key with a leading zero", "cam1:\n", "cam01:\n", "", "",
+       "camchain.yaml: cam01: camera keys are cam0, cam1, ... without leading zeros"},
+      {"list as a key", "cam1:\n", "? [a, b]\n: 1\ncam1:\n", "", "",
+       "camchain.yaml: (top level): keys must be plain names, got a list"},
+      {"absurd focal length", "[400.0, 410.0, 320.0, 240.0]", "[1e300, 410.0, 320.0, 240.0]", "", "",
+       "camchain.yaml: cam3.intrinsics: fx must lie in (0, 1e+06] pixels, got 1e+300"},
+      {"absurd principal point", "[400.0, 410.0, 320.0, 240.0]", "[400.0, 410.0, 320.0, 1e12]", "", "",
+       "camchain.yaml: cam3.intrinsics: cy must lie in [-1e+06, 1e+06], got 1e+12"},
+      {"absurd distortion", "[-0.28, 0.07, 0.001, -0.0005]", "[-0.28, 1e9, 0.001, -0.0005]", "", "",
+       "camchain.yaml: cam3.distortion_coeffs: k2 must lie in [-1000, 1000], got 1e+09"},
+      {"absurd xi", "[0.9, 290.0", "[1e9, 290.0", "", "", "camchain.yaml: cam4.intrinsics: xi must be at most 1000"},
+      {"huge resolution", "resolution: [640, 480]", "resolution: [100000, 100000]", "", "",
+       "camchain.yaml: cam3.resolution: resolution must be at most 20000x20000 pixels, got 100000x100000"},
+      {"resolution beyond int range", "resolution: [640, 480]", "resolution: [1e300, 480]", "", "",
+       "camchain.yaml: cam3.resolution: resolution must be at most 20000x20000 pixels, got 1e+300x480"},
+      {"absurd translation", "  - [0.0, 1.0, 0.0, 0.5]", "  - [0.0, 1.0, 0.0, 1e300]", "", "",
+       "camchain.yaml: cam4.T_cn_cnm1: translation must lie within 10000 m"},
+      {"two cameras, one frame", "", "", "cam4: side_optical", "cam4: front_center_optical",
+       "mount.yaml: frame_ids.cam4: frame 'front_center_optical' is also cam0's; each camera needs its own tf frame"},
+      {"frame id clashing with a default", "", "", "cam0: front_center_optical", "cam0: cam2",
+       "mount.yaml: (frame of cam2): frame 'cam2' is also cam0's"},
+      {"camera frame is the base frame", "", "", "cam4: side_optical", "cam4: base_link",
+       "mount.yaml: frame_ids.cam4: frame 'base_link' is the base frame; each camera needs its own frame"},
+      {"empty frame id", "", "", "cam4: side_optical", "cam4: ''", "mount.yaml: frame_ids.cam4: must not be empty"},
+      {"frame id not a string", "", "", "cam4: side_optical", "cam4: [a, b]",
+       "mount.yaml: frame_ids.cam4: expected a string"},
   };
   for (const BadCase& c : cases) {
     SCOPED_TRACE(c.what);
@@ -324,6 +356,33 @@ TEST_F(RigCalibration, BadFilesGiveSpecificErrors) {
       EXPECT_NE(msg.find(dir_), std::string::npos) << "no file path in: " << msg;
     }
   }
+}
+
+TEST_F(RigCalibration, DirectoriesHugeFilesAndStringsAreCalibrationErrors) {
+  const std::string mount = write("mount.yaml", kMount);
+  const auto error = [](const std::function<void()>& f) -> std::string {
+    try {
+      f();
+    } catch (const CalibrationError& e) {
+      return e.what();
+    }
+    return "(loaded)";
+  };
+  EXPECT_EQ(error([&] { loadKalibrRig(dir_, mount); }), dir_ + ": is a directory, expected a calibration file");
+  EXPECT_EQ(error([&] { loadKalibrRig(write("camchain.yaml", kCamchain), dir_); }),
+            dir_ + ": is a directory, expected a calibration file");
+  EXPECT_EQ(error([&] { loadPslCalibration(dir_, 1280, 800); }), dir_ + ": is a directory, expected a calibration file");
+  const std::string big = write("big.yaml", "# " + std::string(2 << 20, 'x') + "\n");
+  EXPECT_EQ(error([&] { loadKalibrRig(big, mount); }),
+            big + ": too large for a calibration file (more than 1048576 bytes)");
+  // The string entry point names the files it is given.
+  EXPECT_EQ(loadKalibrRigFromStrings(kCamchain, kMount).cameras.size(), 5u);
+  EXPECT_EQ(error([&] { loadKalibrRigFromStrings("cam0: [", kMount, "a.yaml", "b.yaml"); }).rfind("a.yaml: YAML syntax error", 0),
+            0u);
+  // A camera key given twice.
+  const std::string twice = std::string(kCamchain) + "cam3:\n  camera_model: pinhole\n";
+  const std::string msg = error([&] { loadKalibrRigFromStrings(twice, kMount); });
+  EXPECT_TRUE(msg == "camchain.yaml: cam3: appears twice" || msg.rfind("camchain.yaml: YAML syntax error", 0) == 0) << msg;
 }
 
 TEST_F(RigCalibration, MissingFilesAndBadPslFiles) {
@@ -351,6 +410,14 @@ TEST_F(RigCalibration, MissingFilesAndBadPslFiles) {
        "intrinsics: fx must be positive"},
       {"895.5 0 649.6 894.7 398.7 1.158 -0.33 0.086 -0.0006 0\n1 0 0 1.9\n0 2 0 1.4\n0 0 1 0\n",
        "[R | C]: rotation is not orthonormal"},
+      {"895.5 0 649.6 894.7 398.7 1.158 -0.33 0.086 -0.0006 nan\n1 0 0 1.9\n0 1 0 1.4\n0 0 1 0\n",
+       "calib.txt: line 1: not a number: 'nan'"},
+      {"1e300 0 649.6 894.7 398.7 1.158 -0.33 0.086 -0.0006 0\n1 0 0 1.9\n0 1 0 1.4\n0 0 1 0\n",
+       "calib.txt: intrinsics: fx must lie in (0, 1e+06] pixels, got 1e+300"},
+      {"895.5 0 649.6 894.7 398.7 1.158 -0.33 0.086 -0.0006 0\n1 0 0 1.9\n0 1 0 1.4\n0 0 1 0\n1 2 3\n",
+       "calib.txt: line 5: expected 4 non-empty lines (intrinsics, then a 3x4 [R | C]), got more"},
+      {"895.5 0 649.6 894.7 398.7 1.158 -0.33 0.086 -0.0006 0 1\n1 0 0 1.9\n0 1 0 1.4\n0 0 1 0\n",
+       "calib.txt: line 1: too many values (at most 10 on a line)"},
   };
   for (const auto& c : cases) {
     try {

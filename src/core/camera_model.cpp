@@ -28,6 +28,41 @@ void requirePositive(const char* name, double value) {
   }
 }
 
+// |value| <= limit (and finite): absurd values are a broken file, not a lens.
+void requireWithin(const char* name, double value, double limit) {
+  requireFinite(name, value);
+  if (std::abs(value) > limit) {
+    std::ostringstream msg;
+    msg << name << " must lie in [" << -limit << ", " << limit << "], got " << value;
+    throw std::invalid_argument(msg.str());
+  }
+}
+
+void requireFocal(const char* name, double value) {
+  requirePositive(name, value);
+  if (value > kMaxFocalLength) {
+    std::ostringstream msg;
+    msg << name << " must lie in (0, " << kMaxFocalLength << "] pixels, got " << value;
+    throw std::invalid_argument(msg.str());
+  }
+}
+
+void requireDistortion(const char* name, double value) { requireWithin(name, value, kMaxDistortionCoeff); }
+
+void requireSize(int width, int height) {
+  if (width <= 0 || height <= 0) {
+    std::ostringstream msg;
+    msg << "resolution must be positive, got " << width << "x" << height;
+    throw std::invalid_argument(msg.str());
+  }
+  if (width > kMaxImageSide || height > kMaxImageSide) {
+    std::ostringstream msg;
+    msg << "resolution must be at most " << kMaxImageSide << "x" << kMaxImageSide << " pixels, got " << width << "x"
+        << height;
+    throw std::invalid_argument(msg.str());
+  }
+}
+
 // Smallest r^2 > 0 where d/dr [r (1 + k1 r^2 + k2 r^4)] = 1 + 3 k1 s + 5 k2 s^2
 // (s = r^2) reaches zero: beyond it the radial distortion folds back and cannot
 // be inverted.
@@ -69,16 +104,12 @@ double kannalaBrandtMaxTheta(const FmCameraT<double>& cam) {
 }  // namespace
 
 CameraModel CameraModel::make(CameraModelType type, const Intrinsics& in) {
-  if (in.width <= 0 || in.height <= 0) {
-    std::ostringstream msg;
-    msg << "resolution must be positive, got " << in.width << "x" << in.height;
-    throw std::invalid_argument(msg.str());
-  }
-  requirePositive("fx", in.fx);
-  requirePositive("fy", in.fy);
-  requireFinite("cx", in.cx);
-  requireFinite("cy", in.cy);
-  requireFinite("skew", in.skew);
+  requireSize(in.width, in.height);
+  requireFocal("fx", in.fx);
+  requireFocal("fy", in.fy);
+  requireWithin("cx", in.cx, kMaxPrincipalPoint);
+  requireWithin("cy", in.cy, kMaxPrincipalPoint);
+  requireWithin("skew", in.skew, kMaxFocalLength);
   CameraModel cam;
   FmCameraT<double>& p = cam.params_;
   p.model = static_cast<int>(type);
@@ -96,10 +127,10 @@ CameraModel CameraModel::make(CameraModelType type, const Intrinsics& in) {
 
 CameraModel CameraModel::pinhole(const Intrinsics& in, double k1, double k2, double p1, double p2) {
   CameraModel cam = make(CameraModelType::kPinhole, in);
-  requireFinite("k1", k1);
-  requireFinite("k2", k2);
-  requireFinite("p1", p1);
-  requireFinite("p2", p2);
+  requireDistortion("k1", k1);
+  requireDistortion("k2", k2);
+  requireDistortion("p1", p1);
+  requireDistortion("p2", p2);
   FmCameraT<double>& p = cam.params_;
   p.k1 = k1;
   p.k2 = k2;
@@ -116,6 +147,11 @@ CameraModel CameraModel::unified(const Intrinsics& in, double xi, double k1, dou
   if (xi < 0.0) {
     std::ostringstream msg;
     msg << "xi must be >= 0, got " << xi;
+    throw std::invalid_argument(msg.str());
+  }
+  if (xi > kMaxUnifiedXi) {
+    std::ostringstream msg;
+    msg << "xi must be at most " << kMaxUnifiedXi << ", got " << xi;
     throw std::invalid_argument(msg.str());
   }
   cam.params_.model = FM_MODEL_UNIFIED;
@@ -145,10 +181,10 @@ CameraModel CameraModel::doubleSphere(const Intrinsics& in, double xi, double al
 CameraModel CameraModel::kannalaBrandt(const Intrinsics& in, double k1, double k2, double k3,
                                        double k4) {
   CameraModel cam = make(CameraModelType::kKannalaBrandt, in);
-  requireFinite("k1", k1);
-  requireFinite("k2", k2);
-  requireFinite("k3", k3);
-  requireFinite("k4", k4);
+  requireDistortion("k1", k1);
+  requireDistortion("k2", k2);
+  requireDistortion("k3", k3);
+  requireDistortion("k4", k4);
   FmCameraT<double>& p = cam.params_;
   p.k1 = k1;
   p.k2 = k2;
@@ -174,13 +210,31 @@ std::string CameraModel::name() const {
 
 bool CameraModel::project(const Eigen::Vector3d& p_C, Eigen::Vector2d* uv) const {
   double u = 0.0, v = 0.0;
-  const int valid = fm_project(&params_, p_C.x(), p_C.y(), p_C.z(), &u, &v);
+  *uv = Eigen::Vector2d(NAN, NAN);
+  // Non-finite and absurdly far points have no pixel (their squares would
+  // overflow and land on the principal point); the origin has no direction.
+  if (!p_C.allFinite()) return false;
+  const double extent = p_C.cwiseAbs().maxCoeff();
+  if (extent > kMaxProjectDistance || extent == 0.0) return false;
+  Eigen::Vector3d p = p_C;
+  // Every model depends on the direction alone: bring tiny points (whose
+  // squares would underflow) to unit size by an exact power of two.
+  if (extent < 1e-100) {
+    int exponent = 0;
+    std::frexp(extent, &exponent);
+    p = Eigen::Vector3d(std::ldexp(p.x(), -exponent), std::ldexp(p.y(), -exponent), std::ldexp(p.z(), -exponent));
+  }
+  const int valid = fm_project(&params_, p.x(), p.y(), p.z(), &u, &v);
   *uv = Eigen::Vector2d(u, v);
   return valid != 0 && std::isfinite(u) && std::isfinite(v);
 }
 
 bool CameraModel::unproject(const Eigen::Vector2d& uv, Eigen::Vector3d* ray_C) const {
   double x = 0.0, y = 0.0, z = 0.0;
+  if (!uv.allFinite()) {
+    *ray_C = Eigen::Vector3d::Constant(NAN);
+    return false;
+  }
   const int valid = fm_unproject(&params_, uv.x(), uv.y(), &x, &y, &z);
   *ray_C = Eigen::Vector3d(x, y, z);
   return valid != 0 && ray_C->allFinite();
@@ -214,9 +268,12 @@ double CameraModel::maxValidAngle() const {
 }
 
 CameraModel CameraModel::scaled(double scale, int width, int height) const {
-  if (!(scale > 0.0) || width <= 0 || height <= 0) {
+  if (!(scale > 0.0) || !std::isfinite(scale) || width <= 0 || height <= 0) {
     throw std::invalid_argument("scaled camera: scale and size must be positive");
   }
+  requireSize(width, height);
+  requireFocal("scaled fx", params_.fx * scale);
+  requireFocal("scaled fy", params_.fy * scale);
   CameraModel c = *this;
   c.params_.fx *= scale;
   c.params_.fy *= scale;
@@ -232,6 +289,7 @@ CameraModel CameraModel::cropped(int x0, int y0, int width, int height) const {
   if (width <= 0 || height <= 0) {
     throw std::invalid_argument("cropped camera: size must be positive");
   }
+  requireSize(width, height);
   CameraModel c = *this;
   c.params_.cx -= x0;
   c.params_.cy -= y0;

@@ -1,8 +1,10 @@
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <filesystem>
 #include <fstream>
 #include <map>
-#include <regex>
+#include <set>
 #include <sstream>
 
 #include <yaml-cpp/yaml.h>
@@ -16,13 +18,39 @@ namespace {
   throw CalibrationError(file + ": " + (field.empty() ? "" : field + ": ") + what);
 }
 
-YAML::Node loadYaml(const std::string& path) {
+// Calibration files are a few kilobytes; anything this large is not one (and
+// would only cost memory to parse).
+constexpr std::uintmax_t kMaxCalibrationFileBytes = 1u << 20;
+
+// The whole text of a calibration file: it must exist, not be a directory and
+// be small (a pipe such as <(...) works too).
+std::string readCalibrationFile(const std::string& path) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const fs::file_status st = fs::status(path, ec);
+  if (ec || !fs::exists(st)) fail(path, "", "cannot open file");
+  if (fs::is_directory(st)) fail(path, "", "is a directory, expected a calibration file");
+  std::ifstream f(path, std::ios::binary);
+  if (!f) fail(path, "", "cannot open file");
+  std::string text(kMaxCalibrationFileBytes + 1, '\0');
+  f.read(&text[0], static_cast<std::streamsize>(text.size()));
+  if (f.bad()) fail(path, "", "cannot read file");
+  text.resize(static_cast<size_t>(f.gcount()));
+  if (text.size() > kMaxCalibrationFileBytes) {
+    fail(path, "", "too large for a calibration file (more than " + std::to_string(kMaxCalibrationFileBytes) +
+                       " bytes)");
+  }
+  return text;
+}
+
+YAML::Node parseYaml(const std::string& text, const std::string& name) {
+  if (text.size() > kMaxCalibrationFileBytes) fail(name, "", "too large for a calibration file");
   try {
-    return YAML::LoadFile(path);
-  } catch (const YAML::BadFile&) {
-    fail(path, "", "cannot open file");
+    return YAML::Load(text);
   } catch (const YAML::ParserException& e) {
-    fail(path, "", std::string("YAML syntax error: ") + e.what());
+    fail(name, "", std::string("YAML syntax error: ") + e.what());
+  } catch (const std::exception& e) {  // e.g. yaml-cpp's depth limit
+    fail(name, "", std::string("cannot parse YAML: ") + e.what());
   }
 }
 
@@ -80,6 +108,12 @@ Eigen::Isometry3d readTransform(const YAML::Node& node, const std::string& file,
   iso.linear() = Eigen::Quaterniond(Eigen::Matrix3d(T.topLeftCorner<3, 3>())).normalized()
                      .toRotationMatrix();
   iso.translation() = T.topRightCorner<3, 1>();
+  if (iso.translation().cwiseAbs().maxCoeff() > kMaxRigTranslation) {
+    std::ostringstream msg;
+    msg << "translation must lie within " << kMaxRigTranslation << " m, got [" << iso.translation().transpose()
+        << "]";
+    fail(file, field, msg.str());
+  }
   return iso;
 }
 
@@ -90,6 +124,15 @@ CameraModel readCamera(const YAML::Node& cam, const std::string& file, const std
   Intrinsics in;
   if (res[0] != std::floor(res[0]) || res[1] != std::floor(res[1])) {
     fail(file, name + ".resolution", "must be whole numbers of pixels");
+  }
+  {
+    std::ostringstream size;
+    size << res[0] << "x" << res[1];
+    if (res[0] < 1 || res[1] < 1) fail(file, name + ".resolution", "resolution must be positive, got " + size.str());
+    if (res[0] > kMaxImageSide || res[1] > kMaxImageSide) {
+      fail(file, name + ".resolution", "resolution must be at most " + std::to_string(kMaxImageSide) + "x" +
+                                           std::to_string(kMaxImageSide) + " pixels, got " + size.str());
+    }
   }
   in.width = static_cast<int>(res[0]);
   in.height = static_cast<int>(res[1]);
@@ -134,8 +177,12 @@ CameraModel readCamera(const YAML::Node& cam, const std::string& file, const std
     }
   } catch (const std::invalid_argument& e) {
     const std::string what = e.what();
-    const bool is_resolution = what.rfind("resolution", 0) == 0;
-    fail(file, is_resolution ? name + ".resolution" : intr_field, what);
+    std::string field = intr_field;
+    if (what.rfind("resolution", 0) == 0) field = name + ".resolution";
+    for (const char* k : {"k1 ", "k2 ", "k3 ", "k4 ", "p1 ", "p2 "}) {
+      if (what.rfind(k, 0) == 0) field = name + ".distortion_coeffs";
+    }
+    fail(file, field, what);
   }
   fail(file, name + ".camera_model",
        "unknown camera model '" + model + "' (expected omni, ds or pinhole)");
@@ -193,18 +240,41 @@ void checkRigidTransform(const Eigen::Matrix4d& T, const std::string& where) {
   }
 }
 
-Rig loadKalibrRig(const std::string& camchain_path, const std::string& mount_path) {
-  const YAML::Node chain = loadYaml(camchain_path);
-  const YAML::Node mount = loadYaml(mount_path);
+namespace {
+
+// "camN" with N a camera index without leading zeros: N, or -1 when `key` is
+// not a camera key at all. Throws for an index beyond the rig's limit.
+int cameraIndex(const std::string& key, const std::string& file) {
+  if (key.size() < 4 || key.compare(0, 3, "cam") != 0) return -1;
+  const std::string digits = key.substr(3);
+  if (digits.find_first_not_of("0123456789") != std::string::npos) return -1;
+  if (digits.size() > 1 && digits[0] == '0') {
+    fail(file, key, "camera keys are cam0, cam1, ... without leading zeros");
+  }
+  if (digits.size() > 4 || std::stoi(digits) >= kMaxRigCameras) {
+    fail(file, key, "camera index out of range: a rig has at most " + std::to_string(kMaxRigCameras) +
+                        " cameras (cam0 ... cam" + std::to_string(kMaxRigCameras - 1) + ")");
+  }
+  return std::stoi(digits);
+}
+
+// The text of a map key, or a CalibrationError for keys that are not scalars.
+std::string keyText(const YAML::Node& key, const std::string& file, const std::string& where) {
+  if (!key.IsScalar()) fail(file, where, "keys must be plain names, got a " + std::string(key.IsMap() ? "map" : "list"));
+  return key.Scalar();
+}
+
+Rig parseKalibrRig(const YAML::Node& chain, const YAML::Node& mount, const std::string& camchain_path,
+                   const std::string& mount_path) {
   if (!chain.IsMap()) fail(camchain_path, "", "expected a map of cameras (cam0, cam1, ...)");
   if (!mount.IsMap()) fail(mount_path, "", "expected a map with T_base_cam0");
 
   std::map<int, YAML::Node> by_index;
-  static const std::regex kCamKey("cam([0-9]+)");
   for (const auto& kv : chain) {
-    const std::string key = kv.first.as<std::string>();
-    std::smatch m;
-    if (std::regex_match(key, m, kCamKey)) by_index[std::stoi(m[1])] = kv.second;
+    const int index = cameraIndex(keyText(kv.first, camchain_path, "(top level)"), camchain_path);
+    if (index < 0) continue;
+    if (by_index.count(index)) fail(camchain_path, "cam" + std::to_string(index), "appears twice");
+    by_index[index] = kv.second;
   }
   if (by_index.empty()) fail(camchain_path, "cam0", "missing (no camera in the camchain)");
   int expected = 0;
@@ -215,11 +285,21 @@ Rig loadKalibrRig(const std::string& camchain_path, const std::string& mount_pat
 
   Rig rig;
   if (mount["base_frame"]) rig.base_frame = readString(mount["base_frame"], mount_path, "base_frame");
+  if (rig.base_frame.empty()) fail(mount_path, "base_frame", "must not be empty");
   const Eigen::Isometry3d T_base_cam0 = readTransform(mount["T_base_cam0"], mount_path, "T_base_cam0");
   const YAML::Node frame_ids = mount["frame_ids"];
   if (frame_ids && !frame_ids.IsMap()) fail(mount_path, "frame_ids", "expected a map camN: frame");
+  std::map<std::string, std::string> frame_of;  // camera name -> frame id given in the mount
+  if (frame_ids) {
+    for (const auto& kv : frame_ids) {
+      const std::string key = keyText(kv.first, mount_path, "frame_ids");
+      if (frame_of.count(key)) fail(mount_path, "frame_ids." + key, "appears twice");
+      frame_of[key] = readString(kv.second, mount_path, "frame_ids." + key);
+    }
+  }
 
   Eigen::Isometry3d T_cn_c0 = Eigen::Isometry3d::Identity();
+  std::map<std::string, std::string> camera_of_frame;
   for (const auto& kv : by_index) {
     const std::string name = "cam" + std::to_string(kv.first);
     const YAML::Node& node = kv.second;
@@ -233,31 +313,77 @@ Rig loadKalibrRig(const std::string& camchain_path, const std::string& mount_pat
     }
     cam.T_cam0_cam = T_cn_c0.inverse();
     cam.T_base_cam = T_base_cam0 * cam.T_cam0_cam;
+    if (!cam.T_base_cam.matrix().allFinite()) fail(camchain_path, name, "the chained transforms overflow");
     cam.frame_id = name;
-    if (frame_ids && frame_ids[name]) {
-      cam.frame_id = readString(frame_ids[name], mount_path, "frame_ids." + name);
+    const auto given = frame_of.find(name);
+    if (given != frame_of.end()) cam.frame_id = given->second;
+    const std::string field = given != frame_of.end() ? "frame_ids." + name : "(frame of " + name + ")";
+    if (cam.frame_id.empty()) fail(mount_path, field, "must not be empty");
+    if (cam.frame_id == rig.base_frame) {
+      fail(mount_path, field, "frame '" + cam.frame_id + "' is the base frame; each camera needs its own frame");
     }
+    const auto taken = camera_of_frame.find(cam.frame_id);
+    if (taken != camera_of_frame.end()) {
+      fail(mount_path, field, "frame '" + cam.frame_id + "' is also " + taken->second +
+                                  "'s; each camera needs its own tf frame");
+    }
+    camera_of_frame[cam.frame_id] = name;
     rig.cameras.push_back(cam);
   }
-  if (frame_ids) {
-    for (const auto& kv : frame_ids) {
-      const std::string key = kv.first.as<std::string>();
-      if (rig.indexOf(key) < 0) fail(mount_path, "frame_ids." + key, "no such camera in the camchain");
-    }
+  for (const auto& kv : frame_of) {
+    if (rig.indexOf(kv.first) < 0) fail(mount_path, "frame_ids." + kv.first, "no such camera in the camchain");
   }
   return rig;
 }
 
+// Runs `parse`, turning any yaml-cpp error that escaped the readers (a node of
+// an unexpected kind deep in the file) into a CalibrationError naming `file`.
+template <typename F>
+auto namingFile(const std::string& file, F parse) -> decltype(parse()) {
+  try {
+    return parse();
+  } catch (const CalibrationError&) {
+    throw;
+  } catch (const YAML::Exception& e) {
+    fail(file, "", std::string("malformed calibration: ") + e.what());
+  }
+}
+
+}  // namespace
+
+Rig loadKalibrRig(const std::string& camchain_path, const std::string& mount_path) {
+  const std::string chain_text = readCalibrationFile(camchain_path);
+  const std::string mount_text = readCalibrationFile(mount_path);
+  return loadKalibrRigFromStrings(chain_text, mount_text, camchain_path, mount_path);
+}
+
+Rig loadKalibrRigFromStrings(const std::string& camchain_yaml, const std::string& mount_yaml,
+                             const std::string& camchain_name, const std::string& mount_name) {
+  const YAML::Node chain = parseYaml(camchain_yaml, camchain_name);
+  const YAML::Node mount = parseYaml(mount_yaml, mount_name);
+  return namingFile(camchain_name + " / " + mount_name,
+                    [&] { return parseKalibrRig(chain, mount, camchain_name, mount_name); });
+}
+
 Rig loadPslCalibration(const std::string& calib_path, int width, int height,
                        const std::string& camera_name) {
-  std::ifstream f(calib_path);
-  if (!f) fail(calib_path, "", "cannot open file");
+  return loadPslCalibrationFromString(readCalibrationFile(calib_path), calib_path, width, height, camera_name);
+}
+
+Rig loadPslCalibrationFromString(const std::string& text, const std::string& calib_path, int width, int height,
+                                 const std::string& camera_name) {
+  if (text.size() > kMaxCalibrationFileBytes) fail(calib_path, "", "too large for a calibration file");
+  std::istringstream f(text);
   std::vector<std::vector<double>> lines;
   std::string line;
   int line_no = 0;
   while (std::getline(f, line)) {
     ++line_no;
     if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
+    if (lines.size() == 4) {
+      fail(calib_path, "line " + std::to_string(line_no),
+           "expected 4 non-empty lines (intrinsics, then a 3x4 [R | C]), got more");
+    }
     std::istringstream ss(line);
     std::vector<double> values;
     std::string tok;
@@ -265,7 +391,11 @@ Rig loadPslCalibration(const std::string& calib_path, int width, int height,
       char* end = nullptr;
       const double v = std::strtod(tok.c_str(), &end);
       if (end == tok.c_str() || *end != '\0' || !std::isfinite(v)) {
-        fail(calib_path, "line " + std::to_string(line_no), "not a number: '" + tok + "'");
+        fail(calib_path, "line " + std::to_string(line_no), "not a number: '" + tok.substr(0, 40) +
+                                                                 (tok.size() > 40 ? "...'" : "'"));
+      }
+      if (values.size() == 10) {
+        fail(calib_path, "line " + std::to_string(line_no), "too many values (at most 10 on a line)");
       }
       values.push_back(v);
     }

@@ -23,6 +23,18 @@ enum class CameraModelType {
   kKannalaBrandt = FM_MODEL_KANNALA_BRANDT,  // Kalibr "pinhole" + "equidistant"
 };
 
+// Limits of a plausible camera; the factories reject anything beyond them (a
+// broken calibration file, not a lens), so no loop over pixels or angles can
+// run away and no field of view comes out as 0 deg.
+constexpr int kMaxImageSide = 20000;            // pixels, width and height
+constexpr double kMaxFocalLength = 1e6;         // pixels: fx, fy in (0, 1e6]; |skew| too
+constexpr double kMaxPrincipalPoint = 1e6;      // pixels: |cx|, |cy|
+constexpr double kMaxDistortionCoeff = 1e3;     // |k1..k4|, |p1|, |p2|
+constexpr double kMaxUnifiedXi = 1e3;           // unified xi in [0, 1e3]
+// project() returns false for points farther than this along any axis
+// (metres), as for non-finite points.
+constexpr double kMaxProjectDistance = 1e30;
+
 // Intrinsics common to every model. Distortion coefficients a model does not
 // use must be zero.
 struct Intrinsics {
@@ -56,9 +68,11 @@ class CameraModel {
   int height() const { return params_.height; }
 
   // Point in the camera frame -> pixel. False (and *uv unspecified) outside the
-  // model's valid domain; the image bounds are not checked (see isInImage).
+  // model's valid domain, for a non-finite point, the origin, or a coordinate
+  // beyond kMaxProjectDistance; the image bounds are not checked (see isInImage).
   bool project(const Eigen::Vector3d& p_C, Eigen::Vector2d* uv) const;
-  // Pixel -> unit ray in the camera frame. False outside the valid domain.
+  // Pixel -> unit ray in the camera frame. False outside the valid domain or
+  // for a non-finite pixel.
   bool unproject(const Eigen::Vector2d& uv, Eigen::Vector3d* ray_C) const;
   // Pixel inside [margin, width-1-margin] x [margin, height-1-margin].
   bool isInImage(const Eigen::Vector2d& uv, double margin = 0.0) const;

@@ -26,6 +26,11 @@ class CalibrationError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+// At most this many cameras in a rig (keys cam0 ... cam63).
+constexpr int kMaxRigCameras = 64;
+// Camera positions (T_base_cam0, T_cn_cnm1 translations) within this many metres.
+constexpr double kMaxRigTranslation = 1e4;
+
 struct RigCamera {
   std::string name;      // "cam0", "cam1", ... as in the camchain
   std::string frame_id;  // tf frame of the camera (optical frame)
@@ -50,8 +55,17 @@ struct Rig {
 //   base_frame: base_link            # optional, default base_link
 //   T_base_cam0: 4x4 row-major list  # required
 //   frame_ids: {cam0: cam0, ...}     # optional, default: the camera name
-// Throws CalibrationError naming the file and field on any problem.
+// Throws CalibrationError naming the file and field on any problem: a missing
+// file or a directory, a file over 1 MiB, YAML syntax, keys camN out of range
+// (at most kMaxRigCameras) or given twice, gaps in the chain, intrinsics out of
+// the camera model's limits (camera_model.h: resolution, focal length, ...),
+// non-rigid transforms, frame ids empty, equal to the base frame or shared by
+// two cameras.
 Rig loadKalibrRig(const std::string& camchain_path, const std::string& mount_path);
+// The same from the files' texts; the names stand for the files in errors.
+Rig loadKalibrRigFromStrings(const std::string& camchain_yaml, const std::string& mount_yaml,
+                             const std::string& camchain_name = "camchain.yaml",
+                             const std::string& mount_name = "mount.yaml");
 
 // Reads PlaneSweepLib's calib.txt: line 1 "fx skew cx fy cy xi k1 k2 p1 p2"
 // (unified model, radtan), then three lines of the 3x4 camera-to-system
@@ -59,6 +73,9 @@ Rig loadKalibrRig(const std::string& camchain_path, const std::string& mount_pat
 // size is not in the file and must be given.
 Rig loadPslCalibration(const std::string& calib_path, int width, int height,
                        const std::string& camera_name = "cam0");
+// The same from the file's text; `calib_name` stands for the file in errors.
+Rig loadPslCalibrationFromString(const std::string& text, const std::string& calib_name, int width,
+                                 int height, const std::string& camera_name = "cam0");
 
 // Writes a rig as a Kalibr camchain plus mount YAML that loadKalibrRig reads
 // back (used by the synthetic-drive generator).
