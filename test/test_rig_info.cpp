@@ -1,11 +1,15 @@
 // The rig_info tool, run as a user would, against hand-computed numbers.
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <iterator>
+#include <stdexcept>
 #include <string>
 
 #include <gtest/gtest.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
 namespace {
 
@@ -101,6 +105,94 @@ TEST(RigInfo, BadCalibrationNamesFileAndField) {
   EXPECT_EQ(r.status, 2);
   EXPECT_NE(r.out.find("bad_camchain.yaml: cam0.intrinsics: fx must be positive"),
             std::string::npos) << r.out;
+}
+
+// Writes `text` to a file in /tmp and returns its path.
+std::string writeTmp(const std::string& name, const std::string& text) {
+  const std::string path = "/tmp/fm_rig_info_test_" + std::to_string(getpid()) + "_" + name;
+  std::ofstream(path) << text;
+  return path;
+}
+
+std::string readFile(const std::string& path) {
+  std::ifstream f(path);
+  return std::string((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+}
+
+std::string replaced(std::string text, const std::string& from, const std::string& to) {
+  const size_t at = text.find(from);
+  if (at == std::string::npos) throw std::logic_error("test setup: '" + from + "' not found");
+  return text.replace(at, from.size(), to);
+}
+
+const std::string kChain = std::string(FM_TEST_DATA_DIR) + "/two_camera_camchain.yaml";
+const std::string kMount = std::string(FM_TEST_DATA_DIR) + "/two_camera_mount.yaml";
+
+TEST(RigInfo, HostileCalibrationsAreRefusedWithExitStatus2) {
+  const std::string chain = readFile(kChain);
+  const std::string big_key = writeTmp("big_key.yaml", replaced(chain, "cam1:", "cam2147483648:"));
+  const std::string huge = writeTmp("huge.yaml", replaced(chain, "resolution: [1024, 544]", "resolution: [100000, 100000]"));
+  const std::string fx = writeTmp("fx.yaml", replaced(chain, "[1.0, 300.0, 300.0,", "[1.0, 1e300, 1e300,"));
+  const std::string shared =
+      writeTmp("shared_mount.yaml", replaced(readFile(kMount), "cam1: cam1_optical", "cam1: cam0_optical"));
+  const struct {
+    std::string args, expected;
+  } cases[] = {
+      {"--camchain " + big_key + " --mount " + kMount,
+       "rig_info: " + big_key + ": cam2147483648: camera index out of range: a rig has at most 64 cameras (cam0 ... cam63)\n"},
+      {"--camchain /tmp --mount " + kMount, "rig_info: --camchain: /tmp is a directory, expected a file\n"},
+      {"--camchain " + kChain + " --mount /tmp", "rig_info: --mount: /tmp is a directory, expected a file\n"},
+      {"--camchain " + huge + " --mount " + kMount,
+       "rig_info: " + huge + ": cam0.resolution: resolution must be at most 20000x20000 pixels, got 100000x100000\n"},
+      {"--camchain " + fx + " --mount " + kMount,
+       "rig_info: " + fx + ": cam0.intrinsics: fx must lie in (0, 1e+06] pixels, got 1e+300\n"},
+      {"--camchain " + kChain + " --mount " + shared,
+       "rig_info: " + shared + ": frame_ids.cam1: frame 'cam0_optical' is also cam0's; each camera needs its own tf frame\n"},
+      {"--psl /tmp --size 1280x800", "rig_info: --psl: /tmp is a directory, expected a file\n"},
+      {"--psl x.txt --size 100000x100000",
+       "rig_info: --size needs WxH with each side in [1, 20000] pixels, got '100000x100000'\n"},
+      {"--psl x.txt --size 1280x800junk",
+       "rig_info: --size needs WxH with each side in [1, 20000] pixels, got '1280x800junk'\n"},
+      {kRig + " --range abc", "rig_info: --range needs a number, got 'abc'\n"},
+      {kRig + " --range -5", "rig_info: --range must be positive, got -5\n"},
+      {kRig + " --range", "rig_info: --range needs a value\n"},
+  };
+  for (const auto& c : cases) {
+    const Result r = run(c.args, "", true);
+    EXPECT_EQ(r.status, 2) << c.args << "\n" << r.out;
+    EXPECT_EQ(r.out.substr(0, c.expected.size()), c.expected) << c.args;
+  }
+}
+
+TEST(RigInfo, LargestCameraSummaryIsQuick) {
+  // 20000 x 20000 pixels, the limit: the field of view is sampled at
+  // 2048 x 2048 (same angles), so the summary takes about a second, not minutes.
+  const std::string chain = writeTmp(
+      "largest.yaml", "cam0:\n  camera_model: omni\n  intrinsics: [1.0, 5859.375, 5859.375, 9999.5, 9999.5]\n"
+                     "  distortion_model: none\n  resolution: [20000, 20000]\n");
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::string mount = writeTmp("largest_mount.yaml", "T_base_cam0: [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]\n");
+  const Result r = run("--camchain " + chain + " --mount " + mount);
+  const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  ASSERT_EQ(r.status, 0) << r.out;
+  EXPECT_LT(s, 20.0);
+  EXPECT_NE(r.out.find("(sampled at 2048x2048)"), std::string::npos) << r.out;
+}
+
+TEST(RigInfo, HugeAndNonFinitePointsAreInvalidNotThePrincipalPoint) {
+  const Result r = run(kRig + " --project cam0", "1e155 1e155 1e155\n1 2 2\nnan 1 1\n1 inf 1\n1e400 0 1\n");
+  EXPECT_EQ(r.out, "invalid\n572.000000000 392.000000000\ninvalid\ninvalid\ninvalid\n");
+  EXPECT_EQ(r.status, 1);  // nan, inf and 1e400 are not finite numbers: bad lines
+  const Result u = run(kRig + " --unproject cam0", "1e300 1e300\n512 272\n");
+  EXPECT_EQ(u.out, "invalid\n0.000000000000 0.000000000000 1.000000000000\n");
+  EXPECT_EQ(u.status, 0);
+}
+
+TEST(RigInfo, OverlongLinesAreRefused) {
+  const Result r = run(kRig + " --project cam0", std::string(10000, '1') + "\n1 2 2\n", true);
+  EXPECT_NE(r.out.find("rig_info: line 1: longer than 4096 characters\n"), std::string::npos) << r.out.substr(0, 300);
+  EXPECT_NE(r.out.find("invalid\n572.000000000 392.000000000\n"), std::string::npos);
+  EXPECT_EQ(r.status, 1);
 }
 
 TEST(RigInfo, DefaultRigPrints) {

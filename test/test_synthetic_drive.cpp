@@ -317,6 +317,22 @@ TEST_F(MakeDrive, BadOptionsGiveClearErrors) {
       {"--out " + dir_ + "/x" + kRigArgs + " --drop 1.5", "--drop must lie in [0, 1)"},
       {"--out /proc/no_such_dir/x" + kRigArgs, "/proc/no_such_dir"},
       {kRigArgs, "--out, --camchain and --mount are required"},
+      // Bounds (issue 15): beyond them a run would hang or fill the memory.
+      {"--out " + dir_ + "/x" + kRigArgs + " --moving 100000", "--moving must lie in [0, 100], got 100000"},
+      {"--out " + dir_ + "/x" + kRigArgs + " --moving 2.5", "--moving needs a whole number, got '2.5'"},
+      {"--out " + dir_ + "/x" + kRigArgs + " --duration 1e9 --rate 1e9", "--rate must be at most 100 Hz, got 1000000000"},
+      {"--out " + dir_ + "/x" + kRigArgs + " --duration 1e9", "--duration must be at most 3600 s, got 1000000000"},
+      {"--out " + dir_ + "/x" + kRigArgs + " --duration 3600 --rate 100",
+       "--duration x --rate must give at most 36000 frame sets, got 360000"},
+      {"--out " + dir_ + "/x" + kRigArgs + " --duration 0.05", "--duration x --rate must give at least 1 frame set, got 0.5"},
+      {"--out " + dir_ + "/x" + kRigArgs + " --speed 0", "--speed must lie in (0, 60] m/s, got 0"},
+      {"--out " + dir_ + "/x" + kRigArgs + " --speed 60 --duration 3600 --rate 1",
+       "--speed x --duration must be at most 50000 m of route, got 216000"},
+      {"--out " + dir_ + "/x" + kRigArgs + " --seed -1", "--seed must lie in [0, 4294967295], got -1"},
+      {"--out " + dir_ + "/x" + kRigArgs + " --seed 1.5", "--seed needs a whole number, got '1.5'"},
+      {"--out " + dir_ + "/x" + kRigArgs + " --rate nan", "--rate needs a number, got 'nan'"},
+      {"--out " + dir_ + "/x --camchain /tmp --mount " + kData + "/small_rig_mount.yaml",
+       "/tmp: is a directory, expected a calibration file"},
   };
   for (const auto& c : cases) {
     const ToolRun r = makeDrive(c.args);

@@ -25,6 +25,7 @@
 #include <map>
 #include <string>
 
+#include "cli.h"
 #include "fisheye_mapping/core/opencl_context.h"
 #include "fisheye_mapping/core/plane_sweep.h"
 #include "fisheye_mapping/core/synthetic_world.h"
@@ -115,15 +116,45 @@ double peakRssMb() {
 }  // namespace
 
 int main(int argc, char** argv) {
+  namespace cli = fm::cli;
   std::map<std::string, std::string> a;
-  for (int i = 1; i + 1 < argc; i += 2) a[std::string(argv[i]).substr(2)] = argv[i + 1];
-  if (!a.count("camchain") || !a.count("mount")) {
-    std::cerr << "usage: depth_benchmark --camchain F --mount F [--repeats N] [--device D] [--backends native,opencl]\n";
+  const char* usage =
+      "usage: depth_benchmark --camchain F --mount F [--repeats N (1 to 1000)] [--device D]\n"
+      "                       [--backends native,opencl] [--band-rows N (1 to 20000)]\n";
+  int repeats = 3, band_rows = 0;
+  try {
+    for (int i = 1; i < argc; ++i) {
+      const std::string opt = argv[i];
+      if (opt == "-h" || opt == "--help") {
+        std::cout << usage;
+        return 0;
+      }
+      static const char* kKnown[] = {"--camchain", "--mount", "--repeats", "--device", "--backends", "--band-rows"};
+      if (std::find(std::begin(kKnown), std::end(kKnown), opt) == std::end(kKnown))
+        throw cli::UsageError("unknown argument '" + opt + "'");
+      if (i + 1 >= argc) throw cli::UsageError(opt + " needs a value");
+      a[opt.substr(2)] = argv[++i];
+    }
+    if (!a.count("camchain") || !a.count("mount")) throw cli::UsageError("--camchain and --mount are required");
+    cli::requireInputFile("--camchain", a["camchain"]);
+    cli::requireInputFile("--mount", a["mount"]);
+    if (a.count("repeats")) repeats = static_cast<int>(cli::parseInt("--repeats", a["repeats"], 1, 1000));
+    if (a.count("band-rows")) band_rows = static_cast<int>(cli::parseInt("--band-rows", a["band-rows"], 1, 20000));
+    if (a.count("backends")) {
+      std::stringstream ss(a["backends"]);
+      int n = 0;
+      for (std::string b; std::getline(ss, b, ',');) {
+        if (b.empty()) throw cli::UsageError("--backends: empty name in '" + a["backends"] + "'");
+        ++n;
+      }
+      if (n == 0 || n > 8) throw cli::UsageError("--backends needs 1 to 8 names, got '" + a["backends"] + "'");
+    }
+  } catch (const cli::UsageError& e) {
+    std::cerr << "depth_benchmark: " << e.what() << "\n" << usage;
     return 2;
   }
   try {
     const fm::Rig rig = fm::loadKalibrRig(a["camchain"], a["mount"]);
-    const int repeats = a.count("repeats") ? std::stoi(a["repeats"]) : 3;
     fm::synth::WorldConfig wc;
     wc.route_length = 120;
     const fm::synth::World world(wc);
@@ -174,7 +205,7 @@ int main(int argc, char** argv) {
           c.backend = backend;
           c.resolution = res;
           c.device = a.count("device") ? a["device"] : "";
-          if (a.count("band-rows")) c.band_rows = std::stoi(a["band-rows"]);
+          if (band_rows > 0) c.band_rows = band_rows;
           if (!filters) c.filters.cost = c.filters.uniqueness = c.filters.consistency = false;
           fm::PlaneSweep sweep(c);
           fm::DepthResult r = sweep.compute(ref, supports, &T_base_ref);  // warm-up: kernel builds, buffers

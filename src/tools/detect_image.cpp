@@ -11,9 +11,11 @@
 #include <string>
 #include <vector>
 
+#include "cli.h"
 #include "fisheye_mapping/core/detector.h"
 
 namespace fm = fisheye_mapping;
+namespace cli = fm::cli;
 
 int main(int argc, char** argv) {
   std::string config, out_dir;
@@ -35,9 +37,25 @@ int main(int argc, char** argv) {
     return 2;
   }
   try {
+    cli::requireInputFile("--config", config);
+    if (!out_dir.empty()) {
+      std::error_code ec;
+      if (!std::filesystem::is_directory(out_dir, ec)) throw cli::UsageError("--out-dir: " + out_dir + ": no such folder");
+    }
+  } catch (const cli::UsageError& e) {
+    std::cerr << "detect_image: " << e.what() << "\n";
+    return 2;
+  }
+  try {
     fm::Detector det(fm::loadDetectorConfig(config));
     int failed = 0;
     for (const auto& path : images) {
+      std::error_code ec;
+      if (std::filesystem::is_directory(path, ec)) {
+        std::cerr << "detect_image: " << path << " is a directory, expected an image file\n";
+        ++failed;
+        continue;
+      }
       cv::Mat img = cv::imread(path, grey ? cv::IMREAD_GRAYSCALE : cv::IMREAD_COLOR);
       if (img.empty()) {
         std::cerr << "detect_image: cannot read " << path << "\n";
@@ -52,8 +70,17 @@ int main(int argc, char** argv) {
         const auto slash = path.find_last_of('/');
         std::string name = slash == std::string::npos ? path : path.substr(slash + 1);
         name = name.substr(0, name.find_last_of('.')) + "_detections.png";
-        if (!cv::imwrite(out_dir + "/" + name, fm::annotateDetections(img, dets))) {
-          std::cerr << "detect_image: cannot write " << out_dir << "/" << name << "\n";
+        const std::string target = out_dir + "/" + name;
+        try {
+          // Written beside the target and renamed: a failed write keeps an earlier file.
+          std::vector<uchar> png;
+          if (!cv::imencode(".png", fm::annotateDetections(img, dets), png))
+            throw std::runtime_error("cannot encode " + target);
+          cli::writeTextAtomically(target, [&](std::ostream& f) {
+            f.write(reinterpret_cast<const char*>(png.data()), static_cast<std::streamsize>(png.size()));
+          });
+        } catch (const std::exception&) {
+          std::cerr << "detect_image: cannot write " << target << "\n";
           ++failed;
         }
       }

@@ -17,35 +17,54 @@
 #include <string>
 #include <vector>
 
+#include "cli.h"
 #include "fisheye_mapping/core/detector.h"
 #include "fisheye_mapping/core/rig.h"
 #include "fisheye_mapping/core/synthetic_world.h"
 
 namespace fm = fisheye_mapping;
+namespace cli = fm::cli;
 
 int main(int argc, char** argv) {
   std::string config, camchain, mount, image_path, targets = "cpu,opencl";
   int repeats = 20;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::cerr << "detector_benchmark: " << a << " needs a value\n";
-        std::exit(2);
-      }
-      return argv[++i];
-    };
-    if (a == "--config") config = next();
-    else if (a == "--camchain") camchain = next();
-    else if (a == "--mount") mount = next();
-    else if (a == "--image") image_path = next();
-    else if (a == "--targets") targets = next();
-    else if (a == "--repeats") repeats = std::max(1, std::atoi(next().c_str()));
-    else {
-      std::cerr << "usage: detector_benchmark --config YAML --camchain F --mount F [--image PNG] "
-                   "[--targets cpu,opencl] [--repeats N]\n";
-      return 2;
+  const char* usage =
+      "usage: detector_benchmark --config YAML --camchain F --mount F [--image PNG] "
+      "[--targets cpu,opencl] [--repeats N (1 to 10000)]\n";
+  try {
+    for (int i = 1; i < argc; ++i) {
+      const std::string a = argv[i];
+      auto next = [&]() -> std::string {
+        if (i + 1 >= argc) throw cli::UsageError(a + " needs a value");
+        return argv[++i];
+      };
+      if (a == "--config") config = next();
+      else if (a == "--camchain") camchain = next();
+      else if (a == "--mount") mount = next();
+      else if (a == "--image") image_path = next();
+      else if (a == "--targets") targets = next();
+      else if (a == "--repeats") repeats = static_cast<int>(cli::parseInt(a, next(), 1, 10000));
+      else throw cli::UsageError("unknown argument '" + a + "'");
     }
+    if (config.empty()) throw cli::UsageError("--config is required");
+    cli::requireInputFile("--config", config);
+    if (!image_path.empty()) {
+      cli::requireInputFile("--image", image_path);
+    } else {
+      if (camchain.empty() || mount.empty()) throw cli::UsageError("--camchain and --mount (or --image) are required");
+      cli::requireInputFile("--camchain", camchain);
+      cli::requireInputFile("--mount", mount);
+    }
+    std::stringstream ts(targets);
+    int n_targets = 0;
+    for (std::string t; std::getline(ts, t, ',');) {
+      if (t.empty()) throw cli::UsageError("--targets: empty name in '" + targets + "'");
+      if (++n_targets > 16) throw cli::UsageError("--targets: at most 16 targets");
+    }
+    if (n_targets == 0) throw cli::UsageError("--targets needs at least one target");
+  } catch (const cli::UsageError& e) {
+    std::cerr << "detector_benchmark: " << e.what() << "\n" << usage;
+    return 2;
   }
   try {
     if (config.empty()) throw std::runtime_error("--config is required");

@@ -28,6 +28,7 @@
 #include <tf2_eigen/tf2_eigen.h>
 #include <tf2_msgs/TFMessage.h>
 
+#include "cli.h"
 #include "fisheye_mapping/Detection2DArray.h"
 #include "fisheye_mapping/core/rig.h"
 #include "fisheye_mapping/core/synthetic_world.h"
@@ -40,10 +41,12 @@ const char* kUsage =
     "usage: make_drive --out DIR --camchain FILE --mount FILE [options]\n"
     "  --preset urban|forest|flat  world (default urban)\n"
     "  --seed N                    random seed (default 1): same seed, same bag\n"
-    "  --duration S                seconds of drive (default 20)\n"
-    "  --rate HZ                   camera rate (default 10)\n"
-    "  --speed M_PER_S             ego speed (default 8)\n"
-    "  --moving N                  moving vehicles (default 6)\n"
+    "  --duration S                seconds of drive, at most 3600 (default 20)\n"
+    "  --rate HZ                   camera rate, at most 100 (default 10); duration x rate:\n"
+    "                              1 to 36000 frame sets\n"
+    "  --speed M_PER_S             ego speed, at most 60 (default 8); speed x duration at\n"
+    "                              most 50 km\n"
+    "  --moving N                  moving vehicles, 0 to 100 (default 6)\n"
     "  --jitter-ms MS              per-camera stamp jitter, uniform +-MS (default 0)\n"
     "  --drop P                    probability of dropping a camera image (default 0)\n"
     "  --pose-noise M              std. dev. of GNSS/INS position noise in metres (default 0)\n"
@@ -85,11 +88,28 @@ struct Options {
 }
 
 double number(const std::string& flag, const std::string& text) {
-  char* end = nullptr;
-  const double v = std::strtod(text.c_str(), &end);
-  if (end == text.c_str() || *end != '\0' || !std::isfinite(v)) usageError(flag + " needs a number, got '" + text + "'");
-  return v;
+  try {
+    return fm::cli::parseDouble(flag, text, -1e300, 1e300);
+  } catch (const fm::cli::UsageError& e) {
+    usageError(e.what());
+  }
 }
+
+long long integer(const std::string& flag, const std::string& text, long long lo, long long hi) {
+  try {
+    return fm::cli::parseInt(flag, text, lo, hi);
+  } catch (const fm::cli::UsageError& e) {
+    usageError(e.what());
+  }
+}
+
+// Bounds of a drive: beyond them a run would take hours or fill the disk.
+constexpr double kMaxDuration = 3600;       // seconds
+constexpr double kMaxRate = 100;            // Hz
+constexpr double kMaxFrameSets = 36000;     // duration x rate
+constexpr double kMaxSpeed = 60;            // m/s
+constexpr double kMaxRouteLength = 50000;   // metres: speed x duration
+constexpr int kMaxMoving = 100;             // moving vehicles
 
 Options parse(int argc, char** argv) {
   Options o;
@@ -115,11 +135,11 @@ Options parse(int argc, char** argv) {
     else if (a == "--mount") o.mount = v;
     else if (a == "--preset") o.preset = v;
     else if (a == "--gt-depth") o.gt_depth = v;
-    else if (a == "--seed") o.seed = static_cast<uint32_t>(number(a, v));
+    else if (a == "--seed") o.seed = static_cast<uint32_t>(integer(a, v, 0, 4294967295LL));
     else if (a == "--duration") o.duration = number(a, v);
     else if (a == "--rate") o.rate = number(a, v);
     else if (a == "--speed") o.speed = number(a, v);
-    else if (a == "--moving") o.moving = static_cast<int>(number(a, v));
+    else if (a == "--moving") o.moving = static_cast<int>(integer(a, v, 0, kMaxMoving));
     else if (a == "--jitter-ms") o.jitter_ms = number(a, v);
     else if (a == "--drop") o.drop = number(a, v);
     else if (a == "--pose-noise") o.pose_noise = number(a, v);
@@ -139,10 +159,22 @@ Options parse(int argc, char** argv) {
   if (o.out.empty() || o.camchain.empty() || o.mount.empty()) usageError("--out, --camchain and --mount are required");
   if (!(o.rate > 0)) usageError("--rate must be positive, got " + std::to_string(o.rate));
   if (!(o.duration > 0)) usageError("--duration must be positive, got " + std::to_string(o.duration));
+  if (o.rate > kMaxRate) usageError("--rate must be at most " + fm::cli::numberText(kMaxRate) + " Hz, got " + fm::cli::numberText(o.rate));
+  if (o.duration > kMaxDuration)
+    usageError("--duration must be at most " + fm::cli::numberText(kMaxDuration) + " s, got " + fm::cli::numberText(o.duration));
+  if (o.duration * o.rate > kMaxFrameSets)
+    usageError("--duration x --rate must give at most " + fm::cli::numberText(kMaxFrameSets) + " frame sets, got " +
+               fm::cli::numberText(std::floor(o.duration * o.rate)));
+  if (std::floor(o.duration * o.rate) < 1)
+    usageError("--duration x --rate must give at least 1 frame set, got " + fm::cli::numberText(o.duration * o.rate));
+  if (!(o.speed > 0) || o.speed > kMaxSpeed)
+    usageError("--speed must lie in (0, " + fm::cli::numberText(kMaxSpeed) + "] m/s, got " + fm::cli::numberText(o.speed));
+  if (o.speed * o.duration > kMaxRouteLength)
+    usageError("--speed x --duration must be at most " + fm::cli::numberText(kMaxRouteLength) + " m of route, got " +
+               fm::cli::numberText(o.speed * o.duration));
   if (o.jitter_ms < 0 || o.jitter_ms * 1e-3 >= 0.5 / o.rate) usageError("--jitter-ms must lie in [0, half the frame period)");
   if (o.drop < 0 || o.drop >= 1) usageError("--drop must lie in [0, 1)");
-  if (o.pose_noise < 0) usageError("--pose-noise must be >= 0");
-  if (o.moving < 0) usageError("--moving must be >= 0");
+  if (o.pose_noise < 0 || o.pose_noise > 100) usageError("--pose-noise must lie in [0, 100] m");
   if (o.gt_depth != "ref" && o.gt_depth != "all" && o.gt_depth != "none") usageError("--gt-depth must be ref, all or none");
   if (o.calib_rot_deg < 0 || o.calib_rot_deg > 10) usageError("--calib-rot-deg must lie in [0, 10]");
   if (o.calib_trans_mm < 0 || o.calib_trans_mm > 500) usageError("--calib-trans-mm must lie in [0, 500]");

@@ -11,11 +11,17 @@
 //         from ground-truth depth): accuracy = share of the map's points within
 //         t of the reference, completeness = share of the reference's points
 //         within t of the map (nearest neighbours by PCL's kd-tree)
+//
+// Points with a non-finite coordinate (NaN, inf) are skipped in both clouds and
+// counted in the first line of output. Exit status: 0, 1 on unreadable or empty
+// input or an output that cannot be written (--csv: written under a temporary
+// name, renamed once complete), 2 on bad options.
 #include <pcl/io/pcd_io.h>
 #include <pcl/point_types.h>
 
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <limits>
 #include <iostream>
@@ -23,103 +29,131 @@
 #include <string>
 #include <vector>
 
+#include "cli.h"
 #include "fisheye_mapping/core/mesh_distance.h"
 
 namespace fm = fisheye_mapping;
+namespace cli = fm::cli;
 
 namespace {
 
 using Cloud = pcl::PointCloud<pcl::PointXYZ>;
 
-Cloud::Ptr load(const std::string& path) {
-  Cloud::Ptr c(new Cloud);
-  if (pcl::io::loadPCDFile(path, *c) != 0) throw std::runtime_error("cannot read " + path);
-  return c;
-}
+// The finite points of a PCD file, and how many were skipped.
+struct Points {
+  std::vector<Eigen::Vector3f> p;
+  size_t skipped = 0;
+};
 
-std::vector<Eigen::Vector3f> points(const Cloud& c) {
-  std::vector<Eigen::Vector3f> v;
-  v.reserve(c.size());
-  for (const auto& p : c) v.emplace_back(p.x, p.y, p.z);
-  return v;
+Points load(const std::string& path) {
+  std::error_code ec;
+  const auto bytes = std::filesystem::file_size(path, ec);
+  if (ec) throw std::runtime_error("cannot read " + path + ": " + ec.message());
+  if (bytes == 0) throw std::runtime_error(path + " is empty (0 bytes), not a PCD cloud");
+  Cloud c;
+  if (pcl::io::loadPCDFile(path, c) != 0) throw std::runtime_error("cannot read " + path + " as a PCD cloud");
+  Points out;
+  out.p.reserve(c.size());
+  for (const auto& q : c) {
+    if (std::isfinite(q.x) && std::isfinite(q.y) && std::isfinite(q.z)) out.p.emplace_back(q.x, q.y, q.z);
+    else ++out.skipped;
+  }
+  if (out.p.empty()) {
+    throw std::runtime_error(path + " has no finite point (" + std::to_string(out.skipped) + " non-finite)");
+  }
+  return out;
 }
 
 double share(const std::vector<float>& d, float t) { return fm::shareWithin(d, t); }
 
-void usage() {
-  std::cerr << "usage: map_accuracy --cloud MAP.pcd [--mesh SCENE.ply] [--ref REF.pcd] [--t 0.05,0.1,...]\n"
-               "                    [--trail-tol M] [--csv OUT.csv]\n";
-}
+const char* kUsage =
+    "usage: map_accuracy --cloud MAP.pcd [--mesh SCENE.ply] [--ref REF.pcd] [--t 0.05,0.1,...]\n"
+    "                    [--trail-tol M] [--csv OUT.csv]\n";
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string cloud_path, mesh_path, ref_path, csv_path, ts = "0.05,0.1,0.25,0.5";
+  std::string cloud_path, mesh_path, ref_path, csv_path;
+  std::vector<double> thresholds{0.05, 0.1, 0.25, 0.5};
   float trail_tol = 0.f;
-  for (int i = 1; i + 1 < argc; i += 2) {
-    const std::string a = argv[i];
-    if (a == "--cloud") cloud_path = argv[i + 1];
-    else if (a == "--mesh") mesh_path = argv[i + 1];
-    else if (a == "--ref") ref_path = argv[i + 1];
-    else if (a == "--t") ts = argv[i + 1];
-    else if (a == "--trail-tol") trail_tol = std::stof(argv[i + 1]);
-    else if (a == "--csv") csv_path = argv[i + 1];
-    else {
-      usage();
-      return 2;
+  try {
+    for (int i = 1; i < argc; ++i) {
+      const std::string a = argv[i];
+      if (a == "-h" || a == "--help") {
+        std::cout << kUsage;
+        return 0;
+      }
+      if (a != "--cloud" && a != "--mesh" && a != "--ref" && a != "--t" && a != "--trail-tol" && a != "--csv") {
+        throw cli::UsageError("unknown argument '" + a + "'");
+      }
+      if (i + 1 >= argc) throw cli::UsageError(a + " needs a value");
+      const std::string v = argv[++i];
+      if (a == "--cloud") cloud_path = v;
+      else if (a == "--mesh") mesh_path = v;
+      else if (a == "--ref") ref_path = v;
+      else if (a == "--t") thresholds = cli::parseDoubleList(a, v, 1e-6, 1e3);
+      else if (a == "--trail-tol") trail_tol = static_cast<float>(cli::parseDouble(a, v, 0.0, 1e3));
+      else if (a == "--csv") csv_path = v;
     }
-  }
-  if (cloud_path.empty() || (mesh_path.empty() && ref_path.empty())) {
-    usage();
+    if (cloud_path.empty() || (mesh_path.empty() && ref_path.empty())) {
+      throw cli::UsageError("--cloud and one of --mesh, --ref are required");
+    }
+    cli::requireInputFile("--cloud", cloud_path);
+    if (!mesh_path.empty()) cli::requireInputFile("--mesh", mesh_path);
+    if (!ref_path.empty()) cli::requireInputFile("--ref", ref_path);
+    if (!csv_path.empty()) cli::requireOutputFile("--csv", csv_path);
+  } catch (const cli::UsageError& e) {
+    std::cerr << "map_accuracy: " << e.what() << "\n" << kUsage;
     return 2;
   }
   try {
-    std::vector<float> thresholds;
-    std::stringstream ss(ts);
-    for (std::string t; std::getline(ss, t, ',');) thresholds.push_back(std::stof(t));
     float tmax = trail_tol;
-    for (float t : thresholds) tmax = std::max(tmax, t);
-    const Cloud::Ptr map = load(cloud_path);
+    for (double t : thresholds) tmax = std::max(tmax, static_cast<float>(t));
+    const Points map = load(cloud_path);
     std::vector<float> acc_mesh, acc_ref, comp_ref;
     std::size_t trails = 0;
     if (!mesh_path.empty()) {
       const auto gt = fm::MeshDistance::fromPly(mesh_path, tmax);
-      acc_mesh.resize(map->size());
+      acc_mesh.resize(map.p.size());
 #pragma omp parallel for
-      for (long i = 0; i < long(map->size()); ++i) {
-        const auto& p = (*map)[i];
-        acc_mesh[i] = gt.distance(Eigen::Vector3f(p.x, p.y, p.z));
-      }
+      for (long i = 0; i < long(map.p.size()); ++i) acc_mesh[i] = gt.distance(map.p[i]);
       if (trail_tol > 0)
         for (float d : acc_mesh) trails += d > trail_tol;
     }
-    Cloud::Ptr ref;
-    if (!ref_path.empty()) {
+    Points ref;
+    const bool have_ref = !ref_path.empty();
+    if (have_ref) {
       ref = load(ref_path);
-      const auto m = points(*map), r = points(*ref);
-      acc_ref = fm::nearestDistances(m, r);
-      comp_ref = fm::nearestDistances(r, m);
+      acc_ref = fm::nearestDistances(map.p, ref.p);
+      comp_ref = fm::nearestDistances(ref.p, map.p);
     }
-    std::printf("%zu map points%s%s\n", map->size(), ref ? (", " + std::to_string(ref->size()) + " reference points").c_str() : "",
-                trail_tol > 0 ? (", " + std::to_string(trails) + " points farther than " + std::to_string(trail_tol) +
-                                 " m from the scene (trail voxels)").c_str()
-                              : "");
+    std::string head = std::to_string(map.p.size()) + " map points";
+    if (have_ref) head += ", " + std::to_string(ref.p.size()) + " reference points";
+    if (trail_tol > 0)
+      head += ", " + std::to_string(trails) + " points farther than " + std::to_string(trail_tol) +
+              " m from the scene (trail voxels)";
+    if (map.skipped || ref.skipped) {
+      head += "; non-finite points skipped: " + std::to_string(map.skipped) + " in " + cloud_path;
+      if (have_ref) head += ", " + std::to_string(ref.skipped) + " in " + ref_path;
+    }
+    std::printf("%s\n", head.c_str());
     std::printf("| t (m) |%s%s\n|---|%s%s\n", acc_mesh.empty() ? "" : " within t of the scene |",
-                ref ? " accuracy | completeness |" : "", acc_mesh.empty() ? "" : "---:|", ref ? "---:|---:|" : "");
-    std::ofstream csv;
-    if (!csv_path.empty()) {
-      csv.open(csv_path);
-      csv << "t,scene_within,accuracy,completeness,points,ref_points,trails\n";
-    }
-    for (float t : thresholds) {
+                have_ref ? " accuracy | completeness |" : "", acc_mesh.empty() ? "" : "---:|",
+                have_ref ? "---:|---:|" : "");
+    std::ostringstream csv;
+    csv << "t,scene_within,accuracy,completeness,points,ref_points,trails\n";
+    for (double td : thresholds) {
+      const float t = static_cast<float>(td);
       std::printf("| %.2f |", t);
       if (!acc_mesh.empty()) std::printf(" %.1f %% |", 100 * share(acc_mesh, t));
-      if (ref) std::printf(" %.1f %% | %.1f %% |", 100 * share(acc_ref, t), 100 * share(comp_ref, t));
+      if (have_ref) std::printf(" %.1f %% | %.1f %% |", 100 * share(acc_ref, t), 100 * share(comp_ref, t));
       std::printf("\n");
-      if (csv.is_open())
-        csv << t << "," << (acc_mesh.empty() ? NAN : share(acc_mesh, t)) << "," << (ref ? share(acc_ref, t) : NAN) << ","
-            << (ref ? share(comp_ref, t) : NAN) << "," << map->size() << "," << (ref ? ref->size() : 0) << "," << trails
-            << "\n";
+      csv << t << "," << (acc_mesh.empty() ? NAN : share(acc_mesh, t)) << "," << (have_ref ? share(acc_ref, t) : NAN)
+          << "," << (have_ref ? share(comp_ref, t) : NAN) << "," << map.p.size() << "," << ref.p.size() << ","
+          << trails << "\n";
+    }
+    if (!csv_path.empty()) {
+      cli::writeTextAtomically(csv_path, [&](std::ostream& f) { f << csv.str(); });
     }
   } catch (const std::exception& e) {
     std::cerr << "map_accuracy: " << e.what() << "\n";

@@ -11,7 +11,11 @@
 //
 // Writes DIR/mesh.ply, DIR/cloud.pcd, DIR/cloud_all.pcd (every voxel with a
 // surface, i.e. without the minimum-observation filter), DIR/timings.md (ms
-// per stage) and DIR/timings.csv (one row per frame set).
+// per stage) and DIR/timings.csv (one row per frame set), each under a
+// temporary name renamed over the old file once complete, and prints the files
+// it wrote. Exit status: 0; 1 when the run failed or a map file could not be
+// written (e.g. --frames 1: nothing observed often enough for a mesh; the
+// earlier file of that name stays); 2 on bad options or input paths.
 // --depth gt fuses the bag's ground-truth depth of the reference camera
 // (/<ref>/depth_gt) instead of the plane sweep: the reference map of the
 // evaluation (moving objects masked the same way). Parameters: the stage defaults of
@@ -36,9 +40,11 @@
 #include <memory>
 #include <numeric>
 #include <string>
-#include <sys/stat.h>
+#include <filesystem>
+#include <sstream>
 #include <vector>
 
+#include "cli.h"
 #include "fisheye_mapping/Detection2DArray.h"
 #include "fisheye_mapping/core/depth_mask.h"
 #include "fisheye_mapping/core/detector.h"
@@ -50,6 +56,7 @@
 #include "fisheye_mapping/core/tsdf_mesher.h"
 
 namespace fm = fisheye_mapping;
+namespace cli = fm::cli;
 
 namespace {
 
@@ -59,7 +66,11 @@ double msSince(Clock::time_point t0) { return std::chrono::duration<double, std:
 void usage() {
   std::cerr << "usage: offline_mapper --bag B --camchain F --mount F --out DIR [--config vehicle.yaml]\n"
                "       [--detector none|ground_truth|nanodet|darknet|MODEL.yaml] [--frames N] [--every K]\n"
-               "       [--world map] [--config-dir DIR] [--quiet]\n";
+               "       [--world map] [--depth sweep|gt] [--config-dir DIR] [--quiet]\n"
+               "  --frames N  map at most N frame sets, N in [1, 10000000] (default: all)\n"
+               "  --every K   map every K-th frame set, K in [1, 1000000] (default 1)\n"
+               "  Outputs are written under temporary names and renamed once complete: a failed\n"
+               "  run leaves the files of an earlier run in --out as they were.\n";
 }
 
 YAML::Node loadYaml(const std::string& path) {
@@ -91,38 +102,53 @@ int main(int argc, char** argv) {
   std::string config_dir = FM_CONFIG_DIR;
   int max_frames = 0, every = 1;
   bool quiet = false;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) {
+  try {
+    for (int i = 1; i < argc; ++i) {
+      const std::string a = argv[i];
+      auto next = [&]() -> std::string {
+        if (i + 1 >= argc) throw cli::UsageError(a + " needs a value");
+        return argv[++i];
+      };
+      if (a == "--bag") bag_path = next();
+      else if (a == "--camchain") camchain = next();
+      else if (a == "--mount") mount = next();
+      else if (a == "--out") out = next();
+      else if (a == "--config") config_path = next();
+      else if (a == "--config-dir") config_dir = next();
+      else if (a == "--detector") detector = next();
+      else if (a == "--frames") max_frames = static_cast<int>(cli::parseInt(a, next(), 1, 10000000));
+      else if (a == "--every") every = static_cast<int>(cli::parseInt(a, next(), 1, 1000000));
+      else if (a == "--world") world = next();
+      else if (a == "--depth") depth_src = next();
+      else if (a == "--quiet") quiet = true;
+      else if (a == "-h" || a == "--help") {
         usage();
-        std::exit(2);
+        return 0;
+      } else {
+        throw cli::UsageError("unknown argument '" + a + "'");
       }
-      return argv[++i];
-    };
-    if (a == "--bag") bag_path = next();
-    else if (a == "--camchain") camchain = next();
-    else if (a == "--mount") mount = next();
-    else if (a == "--out") out = next();
-    else if (a == "--config") config_path = next();
-    else if (a == "--config-dir") config_dir = next();
-    else if (a == "--detector") detector = next();
-    else if (a == "--frames") max_frames = std::atoi(next().c_str());
-    else if (a == "--every") every = std::max(1, std::atoi(next().c_str()));
-    else if (a == "--world") world = next();
-    else if (a == "--depth") depth_src = next();
-    else if (a == "--quiet") quiet = true;
-    else {
-      usage();
-      return 2;
     }
-  }
-  if (bag_path.empty() || camchain.empty() || mount.empty() || out.empty() || (depth_src != "sweep" && depth_src != "gt")) {
+    if (bag_path.empty() || camchain.empty() || mount.empty() || out.empty())
+      throw cli::UsageError("--bag, --camchain, --mount and --out are required");
+    if (depth_src != "sweep" && depth_src != "gt") throw cli::UsageError("--depth must be sweep or gt, got '" + depth_src + "'");
+    if (world.empty()) throw cli::UsageError("--world needs a frame name");
+    cli::requireInputFile("--bag", bag_path);
+    cli::requireInputFile("--camchain", camchain);
+    cli::requireInputFile("--mount", mount);
+    if (!config_path.empty()) cli::requireInputFile("--config", config_path);
+    std::error_code ec;
+    if (!std::filesystem::is_directory(config_dir, ec)) throw cli::UsageError("--config-dir: " + config_dir + " is not a folder");
+    if (detector != "none" && detector != "ground_truth" && detector != "nanodet" && detector != "darknet")
+      cli::requireInputFile("--detector", detector);
+    cli::prepareOutputDir("--out", out);
+  } catch (const cli::UsageError& e) {
+    std::cerr << "offline_mapper: " << e.what() << "\n";
     usage();
     return 2;
   }
+  // Temporary outputs of this run; removed when it fails.
+  std::vector<std::string> partials;
   try {
-    mkdir(out.c_str(), 0755);
     const fm::Rig rig = fm::loadKalibrRig(camchain, mount);
     const YAML::Node config = config_path.empty() ? YAML::Node() : loadYaml(config_path);
     const fm::YamlParams sweep_p(stageParams(config_dir + "/plane_sweep_depth.yaml", config, "plane_sweep"), "plane_sweep");
@@ -198,7 +224,11 @@ int main(int argc, char** argv) {
     fm::FrameSetSync<sensor_msgs::Image::ConstPtr> sync(depth_src == "gt" ? 1 : int(rig.cameras.size()),
                                                         fm::SyncPolicy::Exact, 0.0, 10);
     const int ref_slot = depth_src == "gt" ? 0 : ref;
-    std::ofstream csv(out + "/timings.csv");
+    // timings.csv is written under a temporary name and renamed at the end.
+    const std::string csv_tmp = cli::partialName(out + "/timings.csv");
+    partials.push_back(csv_tmp);
+    std::ofstream csv(csv_tmp);
+    if (!csv) throw std::runtime_error("cannot write " + csv_tmp);
     csv << "stamp,sweep_ms,detect_ms,mask_ms,fuse_ms,total_ms,valid_pixels,masked_pixels\n";
     std::vector<double> t_sweep, t_det, t_mask, t_fuse, t_total;
     size_t sets_seen = 0, processed = 0, skipped_pose = 0, no_boxes = 0;
@@ -291,23 +321,26 @@ int main(int argc, char** argv) {
     mesher_all.rebuild(map);  // every block of both stores, after the last frame
     // Each file is written under a temporary name and renamed over the old one
     // only once complete: a failed save keeps what an earlier run wrote.
-    std::vector<std::string> written;
+    std::vector<std::string> written, not_written;
     for (const auto& [what, save] : std::vector<std::pair<std::string, std::function<void(const std::string&)>>>{
-             {"mesh.ply", [&](const std::string& p) { mesher.saveMeshPly(p); }},
+             {"mesh.ply", [&](const std::string& p) {
+                if (mesher.numTriangles() == 0)
+                  throw std::runtime_error("the map has no triangle yet (nothing observed " +
+                                           std::to_string(tsdf_cfg.min_observations) + " times)");
+                mesher.saveMeshPly(p);
+              }},
              {"cloud.pcd", [&](const std::string& p) { mesher.saveCloudPcd(p); }},
              {"cloud_all.pcd", [&](const std::string& p) { mesher_all.saveCloudPcd(p); }}}) {
-      const std::string path = out + "/" + what, tmp = path + ".partial";
       try {
-        save(tmp);
-        if (std::rename(tmp.c_str(), path.c_str()) != 0) throw std::runtime_error("cannot rename " + tmp);
+        cli::writeAtomically(out + "/" + what, save);
         written.push_back(what);
       } catch (const std::exception& e) {  // e.g. nothing observed often enough: say so, keep the rest
-        std::remove(tmp.c_str());
+        not_written.push_back(what);
         std::cerr << "offline_mapper: " << what << " not written: " << e.what() << "\n";
       }
     }
     const auto& s = sync.stats();
-    std::ofstream md(out + "/timings.md");
+    std::ostringstream md;
     char buf[512];
     md << "| stage | median ms | mean ms |\n|---|---:|---:|\n";
     auto row = [&](const char* name, const std::vector<double>& v) {
@@ -327,13 +360,25 @@ int main(int argc, char** argv) {
                   processed, wall, processed / wall, (unsigned long)s.dropped_incomplete, skipped_pose, no_boxes,
                   sweep.backendName().c_str(), mesher.numTriangles(), mesher.surfaceCloud().size());
     md << buf;
-    md.close();
-    std::ifstream in(out + "/timings.md");
-    std::cout << in.rdbuf();
+    csv.close();
+    if (!csv) throw std::runtime_error("cannot write " + csv_tmp + " (disk full?)");
+    if (std::rename(csv_tmp.c_str(), (out + "/timings.csv").c_str()) != 0)
+      throw std::runtime_error("cannot rename " + csv_tmp + " to timings.csv");
+    written.push_back("timings.csv");
+    cli::writeTextAtomically(out + "/timings.md", [&](std::ostream& f) { f << md.str(); });
+    written.push_back("timings.md");
+    std::cout << md.str();
     std::cout << "wrote " << out << "/";
-    for (const auto& w : written) std::cout << w << ", ";
-    std::cout << "timings.md, timings.csv\n";
+    for (size_t k = 0; k < written.size(); ++k) std::cout << (k ? ", " : "") << written[k];
+    std::cout << "\n";
+    if (!not_written.empty()) {
+      std::cout << "not written (earlier files of that name left as they were): ";
+      for (size_t k = 0; k < not_written.size(); ++k) std::cout << (k ? ", " : "") << not_written[k];
+      std::cout << "\n";
+      return 1;
+    }
   } catch (const std::exception& e) {
+    for (const auto& p : partials) std::remove(p.c_str());
     std::cerr << "\noffline_mapper: " << e.what() << "\n";
     return 1;
   }

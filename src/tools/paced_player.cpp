@@ -49,6 +49,7 @@
 #include <string>
 #include <vector>
 
+#include "cli.h"
 #include "fisheye_mapping/FrameDone.h"
 #include "fisheye_mapping/core/frame_pacer.h"
 #include "fisheye_mapping/core/rig.h"
@@ -95,6 +96,28 @@ int main(int argc, char** argv) {
   if (bag_path.empty()) {
     ROS_FATAL("paced_player: parameter ~bag (the rosbag to play) is required");
     return 2;
+  }
+  // Bounds of the numeric parameters: finite, and no wait longer than a day.
+  const auto bad_number = [](const char* name, double v, double lo, double hi) {
+    if (std::isfinite(v) && v >= lo && v <= hi) return false;
+    ROS_FATAL("paced_player: parameter ~%s must lie in [%g, %g], got %g", name, lo, hi, v);
+    return true;
+  };
+  if (bad_number("timeout", timeout, 0.001, 86400) || bad_number("wait_subscribers", wait_subscribers, 0, 86400) ||
+      bad_number("start", start, 0, 1e7)) {
+    return 2;
+  }
+  try {
+    if (!summary_file.empty()) fm::cli::requireOutputFile("~summary_file", summary_file);
+  } catch (const fm::cli::UsageError& e) {
+    ROS_FATAL("paced_player: %s", e.what());
+    return 2;
+  }
+  try {
+    fm::cli::requireInputFile("~bag", bag_path);
+  } catch (const fm::cli::UsageError& e) {  // bad input, as an unreadable bag below
+    ROS_FATAL("paced_player: cannot read the bag %s: %s", bag_path.c_str(), e.what());
+    return 1;
   }
   if (image_topics.empty()) {
     if (camchain.empty() || mount.empty()) {
@@ -259,10 +282,16 @@ int main(int argc, char** argv) {
   ROS_INFO("paced_player: frame sets %zu played, %d fused, %d skipped, %d timed out; %.1f s (%.2f frame sets/s)",
            played.size(), fused, skipped, timed_out, wall, played.size() / std::max(wall, 1e-9));
   if (!summary_file.empty()) {
-    std::ofstream f(summary_file);
-    f << "played: " << played.size() << "\nfused: " << fused << "\nskipped: " << skipped
-      << "\ntimed_out: " << timed_out << "\nstopped_on_bad_input: " << (bad_input ? "true" : "false")
-      << "\nwall_s: " << wall << "\n";
+    try {
+      fm::cli::writeTextAtomically(summary_file, [&](std::ostream& f) {
+        f << "played: " << played.size() << "\nfused: " << fused << "\nskipped: " << skipped
+          << "\ntimed_out: " << timed_out << "\nstopped_on_bad_input: " << (bad_input ? "true" : "false")
+          << "\nwall_s: " << wall << "\n";
+      });
+    } catch (const std::exception& e) {
+      ROS_ERROR("paced_player: summary not written: %s", e.what());
+      bad_input = 1;
+    }
   }
   // Hold the last poses (rviz started after the drive still finds the frames).
   if (hold && !last_pose.empty()) {

@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "cli.h"
 #include "fisheye_mapping/core/rig.h"
 #include "fisheye_mapping/core/rig_geometry.h"
 
@@ -20,7 +21,7 @@ namespace fm = fisheye_mapping;
 
 namespace {
 
-const char* kUsage =
+[[maybe_unused]] const char* kUsage =
     "usage: rig_info (--camchain FILE --mount FILE | --psl FILE --size WxH)\n"
     "                [--range METRES] [--project CAM | --unproject CAM]\n"
     "  Without --project/--unproject: prints each camera's model, resolution,\n"
@@ -30,64 +31,125 @@ const char* kUsage =
     "                  and prints 'u v' (pixels) or 'invalid' per line.\n"
     "  --unproject CAM reads lines 'u v' and prints the unit ray 'x y z' or 'invalid'.\n"
     "  'invalid' means outside the model's valid domain (or, for --project,\n"
-    "  outside the image). Exit status 1 if an input line could not be parsed.\n";
-
-// Parses exactly n finite numbers from a line.
-bool parseNumbers(const std::string& line, int n, std::vector<double>* out) {
-  std::istringstream ss(line);
-  out->clear();
-  double v;
-  while (ss >> v) out->push_back(v);
-  if (!ss.eof()) return false;
-  if (static_cast<int>(out->size()) != n) return false;
-  for (double x : *out) {
-    if (!std::isfinite(x)) return false;
-  }
-  return true;
-}
+    "  outside the image). Exit status 1 if an input line could not be parsed\n"
+    "  (or is longer than 4096 characters), 2 on bad options or calibration.\n";
 
 // Prints -0 as 0.
 double clean(double x) { return std::abs(x) < 5e-13 ? 0.0 : x; }
 
+}  // namespace
+
+// The --project / --unproject line filter, callable on its own (the fuzz
+// target test/fuzz/rig_info_lines calls it).
+namespace rig_info {
+
+// Longest input line read; the rest of a longer line is skipped.
+constexpr size_t kMaxLineLength = 4096;
+
+// Exactly n finite numbers separated by blanks (space, tab, CR), nothing else.
+bool parseNumbers(const std::string& line, int n, std::vector<double>* out) {
+  out->clear();
+  size_t i = 0;
+  while (i < line.size()) {
+    while (i < line.size() && (line[i] == ' ' || line[i] == '\t' || line[i] == '\r')) ++i;
+    if (i == line.size()) break;
+    size_t j = i;
+    while (j < line.size() && line[j] != ' ' && line[j] != '\t' && line[j] != '\r') ++j;
+    if (static_cast<int>(out->size()) == n) return false;  // too many
+    const std::string tok = line.substr(i, j - i);
+    char* end = nullptr;
+    const double v = std::strtod(tok.c_str(), &end);
+    if (end == tok.c_str() || *end != '\0' || !std::isfinite(v)) return false;
+    out->push_back(v);
+    i = j;
+  }
+  return static_cast<int>(out->size()) == n;
+}
+
+// One input line -> one output line (without newline): "u v", the ray
+// "x y z", or "invalid". *parsed is false when the line is not n numbers.
+std::string filterLine(const fm::CameraModel& model, bool project, const std::string& line, bool* parsed) {
+  std::vector<double> in;
+  *parsed = parseNumbers(line, project ? 3 : 2, &in);
+  if (!*parsed) return "invalid";
+  char buf[160];
+  if (project) {
+    Eigen::Vector2d uv;
+    if (!model.project(Eigen::Vector3d(in[0], in[1], in[2]), &uv) || !model.isInImage(uv)) return "invalid";
+    std::snprintf(buf, sizeof(buf), "%.9f %.9f", uv.x(), uv.y());
+  } else {
+    Eigen::Vector3d ray;
+    if (!model.unproject(Eigen::Vector2d(in[0], in[1]), &ray)) return "invalid";
+    std::snprintf(buf, sizeof(buf), "%.12f %.12f %.12f", clean(ray.x()), clean(ray.y()), clean(ray.z()));
+  }
+  return buf;
+}
+
+// Reads one line of at most kMaxLineLength characters (the rest of a longer
+// line is read and dropped, *too_long set). False at the end of input.
+bool readLine(std::istream& in, std::string* line, bool* too_long) {
+  line->clear();
+  *too_long = false;
+  int c = 0;
+  bool any = false;
+  while ((c = in.get()) != EOF) {
+    any = true;
+    if (c == '\n') return true;
+    if (line->size() < kMaxLineLength) line->push_back(static_cast<char>(c));
+    else *too_long = true;
+  }
+  return any;
+}
+
+}  // namespace rig_info
+
+#ifndef FM_RIG_INFO_NO_MAIN  // the fuzz target and the regression test take the filter above alone
+namespace {
+
 int runFilter(const fm::RigCamera& cam, bool project) {
   std::string line;
-  std::vector<double> in;
   int line_no = 0;
   int status = 0;
-  while (std::getline(std::cin, line)) {
+  bool too_long = false;
+  while (rig_info::readLine(std::cin, &line, &too_long)) {
     ++line_no;
-    if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
-    if (!parseNumbers(line, project ? 3 : 2, &in)) {
-      std::cerr << "rig_info: line " << line_no << ": expected " << (project ? "'x y z'" : "'u v'")
-                << ", got '" << line << "'\n";
-      std::printf("invalid\n");
+    if (line.find_first_not_of(" \t\r") == std::string::npos && !too_long) continue;
+    bool parsed = false;
+    const std::string out = too_long ? "invalid" : rig_info::filterLine(cam.model, project, line, &parsed);
+    if (too_long) {
+      std::cerr << "rig_info: line " << line_no << ": longer than " << rig_info::kMaxLineLength
+                << " characters\n";
       status = 1;
-      continue;
+    } else if (!parsed) {
+      std::cerr << "rig_info: line " << line_no << ": expected " << (project ? "'x y z'" : "'u v'")
+                << " (finite numbers), got '" << line.substr(0, 200) << (line.size() > 200 ? "...'" : "'") << "\n";
+      status = 1;
     }
-    if (project) {
-      Eigen::Vector2d uv;
-      if (cam.model.project(Eigen::Vector3d(in[0], in[1], in[2]), &uv) && cam.model.isInImage(uv)) {
-        std::printf("%.9f %.9f\n", uv.x(), uv.y());
-      } else {
-        std::printf("invalid\n");
-      }
-    } else {
-      Eigen::Vector3d ray;
-      if (cam.model.unproject(Eigen::Vector2d(in[0], in[1]), &ray)) {
-        std::printf("%.12f %.12f %.12f\n", clean(ray.x()), clean(ray.y()), clean(ray.z()));
-      } else {
-        std::printf("invalid\n");
-      }
-    }
+    std::printf("%s\n", out.c_str());
   }
   return status;
+}
+
+// The cameras' fields of view and overlaps are scanned pixel by pixel; a large
+// camera is scanned at a reduced resolution (the same angles, sampled more
+// coarsely), so the summary takes bounded time whatever the resolution.
+constexpr int kMaxScanSide = 2048;     // field of view
+constexpr int kMaxOverlapSide = 1024;  // overlap, per pair of cameras
+
+fm::CameraModel scanModel(const fm::CameraModel& model, int max_side) {
+  const int side = std::max(model.width(), model.height());
+  if (side <= max_side) return model;
+  const double s = static_cast<double>(max_side) / side;
+  return model.scaled(s, std::max(1, static_cast<int>(std::lround(model.width() * s))),
+                      std::max(1, static_cast<int>(std::lround(model.height() * s))));
 }
 
 void printSummary(const fm::Rig& rig, double range) {
   std::printf("rig: %zu camera(s), base frame '%s'\n", rig.cameras.size(), rig.base_frame.c_str());
   for (const auto& cam : rig.cameras) {
     const auto& p = cam.model.params();
-    const fm::FieldOfView fov = fm::computeFieldOfView(cam.model);
+    const fm::CameraModel scan = scanModel(cam.model, kMaxScanSide);
+    const fm::FieldOfView fov = fm::computeFieldOfView(scan);
     std::printf("\n%s: %s %dx%d  frame '%s'  topic '%s'\n", cam.name.c_str(),
                 cam.model.name().c_str(), p.width, p.height, cam.frame_id.c_str(),
                 cam.rostopic.c_str());
@@ -96,8 +158,12 @@ void printSummary(const fm::Rig& rig, double range) {
     if (cam.model.type() == fm::CameraModelType::kDoubleSphere) {
       std::printf(" xi %.4f alpha %.4f", p.xi, p.alpha);
     }
-    std::printf("\n  field of view: horizontal %.1f deg, vertical %.1f deg, max off-axis %.1f deg\n",
+    std::printf("\n  field of view: horizontal %.1f deg, vertical %.1f deg, max off-axis %.1f deg",
                 fov.horizontal_deg, fov.vertical_deg, fov.max_off_axis_deg);
+    if (scan.width() != p.width || scan.height() != p.height) {
+      std::printf(" (sampled at %dx%d)", scan.width(), scan.height());
+    }
+    std::printf("\n");
     const Eigen::Vector3d t0 = cam.T_cam0_cam.translation();
     const Eigen::Vector3d tb = cam.T_base_cam.translation();
     std::printf("  position in cam0 [m]: %8.4f %8.4f %8.4f  (baseline %.4f)\n", clean(t0.x()),
@@ -115,7 +181,9 @@ void printSummary(const fm::Rig& rig, double range) {
   std::printf("%8s", "");
   for (const auto& b : rig.cameras) std::printf(" %7s", b.name.c_str());
   std::printf("\n");
-  for (const auto& a : rig.cameras) {
+  for (const auto& cam : rig.cameras) {
+    fm::RigCamera a = cam;
+    a.model = scanModel(cam.model, kMaxOverlapSide);
     std::printf("%8s", a.name.c_str());
     for (const auto& b : rig.cameras) std::printf(" %7.3f", fm::computeOverlap(a, b, range));
     std::printf("\n");
@@ -125,67 +193,69 @@ void printSummary(const fm::Rig& rig, double range) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  namespace cli = fm::cli;
   std::string camchain, mount, psl, size, project_cam, unproject_cam;
   double range = 20.0;
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    auto value = [&](std::string* out) {
-      if (i + 1 >= argc) {
-        std::cerr << "rig_info: " << arg << " needs a value\n" << kUsage;
-        std::exit(2);
+  try {
+    for (int i = 1; i < argc; ++i) {
+      const std::string arg = argv[i];
+      auto value = [&]() -> std::string {
+        if (i + 1 >= argc) throw cli::UsageError(arg + " needs a value");
+        return argv[++i];
+      };
+      if (arg == "--camchain") camchain = value();
+      else if (arg == "--mount") mount = value();
+      else if (arg == "--psl") psl = value();
+      else if (arg == "--size") size = value();
+      else if (arg == "--project") project_cam = value();
+      else if (arg == "--unproject") unproject_cam = value();
+      else if (arg == "--range") range = cli::parsePositive(arg, value(), 1e6);
+      else if (arg == "-h" || arg == "--help") {
+        std::cout << kUsage;
+        return 0;
+      } else {
+        throw cli::UsageError("unknown argument '" + arg + "'");
       }
-      *out = argv[++i];
-    };
-    std::string range_text;
-    if (arg == "--camchain") value(&camchain);
-    else if (arg == "--mount") value(&mount);
-    else if (arg == "--psl") value(&psl);
-    else if (arg == "--size") value(&size);
-    else if (arg == "--project") value(&project_cam);
-    else if (arg == "--unproject") value(&unproject_cam);
-    else if (arg == "--range") {
-      value(&range_text);
-      char* end = nullptr;
-      range = std::strtod(range_text.c_str(), &end);
-      if (*end != '\0' || !(range > 0.0) || !std::isfinite(range)) {
-        std::cerr << "rig_info: --range must be a positive number of metres, got '" << range_text << "'\n";
-        return 2;
-      }
-    } else if (arg == "-h" || arg == "--help") {
-      std::cout << kUsage;
-      return 0;
-    } else {
-      std::cerr << "rig_info: unknown argument '" << arg << "'\n" << kUsage;
-      return 2;
     }
-  }
-  if (!project_cam.empty() && !unproject_cam.empty()) {
-    std::cerr << "rig_info: give --project or --unproject, not both\n";
+    if (!project_cam.empty() && !unproject_cam.empty()) {
+      throw cli::UsageError("give --project or --unproject, not both");
+    }
+    if (!psl.empty() && (!camchain.empty() || !mount.empty())) {
+      throw cli::UsageError("give --camchain and --mount, or --psl and --size, not both");
+    }
+    if (psl.empty() && (camchain.empty() || mount.empty())) {
+      throw cli::UsageError("give --camchain and --mount, or --psl and --size");
+    }
+  } catch (const cli::UsageError& e) {
+    std::cerr << "rig_info: " << e.what() << "\n" << kUsage;
     return 2;
   }
   try {
     fm::Rig rig;
     if (!psl.empty()) {
       int w = 0, h = 0;
-      char x = 0;
-      std::istringstream ss(size);
-      if (!(ss >> w >> x >> h) || x != 'x' || w <= 0 || h <= 0) {
-        std::cerr << "rig_info: --psl needs --size WxH (e.g. 1280x800), got '" << size << "'\n";
-        return 2;
-      }
+      if (size.empty()) throw cli::UsageError("--psl needs --size WxH (e.g. 1280x800)");
+      cli::parseSize("--size", size, fm::kMaxImageSide, &w, &h);
+      cli::requireInputFile("--psl", psl);
       rig = fm::loadPslCalibration(psl, w, h);
-    } else if (!camchain.empty() && !mount.empty()) {
-      rig = fm::loadKalibrRig(camchain, mount);
     } else {
-      std::cerr << "rig_info: give --camchain and --mount, or --psl and --size\n" << kUsage;
-      return 2;
+      cli::requireInputFile("--camchain", camchain);
+      cli::requireInputFile("--mount", mount);
+      rig = fm::loadKalibrRig(camchain, mount);
     }
     if (!project_cam.empty()) return runFilter(rig.camera(project_cam), true);
     if (!unproject_cam.empty()) return runFilter(rig.camera(unproject_cam), false);
     printSummary(rig, range);
+  } catch (const cli::UsageError& e) {
+    std::cerr << "rig_info: " << e.what() << "\n";
+    return 2;
   } catch (const fm::CalibrationError& e) {
     std::cerr << "rig_info: " << e.what() << "\n";
     return 2;
+  } catch (const std::exception& e) {
+    std::cerr << "rig_info: " << e.what() << "\n";
+    return 1;
   }
   return 0;
 }
+#endif  // FM_RIG_INFO_NO_MAIN

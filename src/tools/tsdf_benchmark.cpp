@@ -25,6 +25,7 @@
 #include <string>
 #include <vector>
 
+#include "cli.h"
 #include "fisheye_mapping/core/analytic_scene.h"
 #include "fisheye_mapping/core/tsdf_map.h"
 
@@ -98,19 +99,29 @@ int main(int argc, char** argv) {
   std::string out;
   int n_frames = 30, threads = 0;
   double drive = 0;
-  for (int i = 1; i + 1 < argc; i += 2) {
-    const std::string a = argv[i];
-    if (a == "--out") out = argv[i + 1];
-    else if (a == "--frames") n_frames = std::stoi(argv[i + 1]);
-    else if (a == "--threads") threads = std::stoi(argv[i + 1]);
-    else if (a == "--drive") drive = std::stod(argv[i + 1]);
-    else {
-      std::cerr << "tsdf_benchmark: unknown argument " << a << "\n";
-      return 2;
+  const char* usage =
+      "usage: tsdf_benchmark --out DIR [--frames N (1 to 10000)] [--threads T (0 to 1024)]\n"
+      "       tsdf_benchmark --drive METRES (up to 100000) --out DIR\n";
+  try {
+    for (int i = 1; i < argc; ++i) {
+      const std::string a = argv[i];
+      if (a == "-h" || a == "--help") {
+        std::cout << usage;
+        return 0;
+      }
+      if (a != "--out" && a != "--frames" && a != "--threads" && a != "--drive")
+        throw fm::cli::UsageError("unknown argument '" + a + "'");
+      if (i + 1 >= argc) throw fm::cli::UsageError(a + " needs a value");
+      const std::string v = argv[++i];
+      if (a == "--out") out = v;
+      else if (a == "--frames") n_frames = static_cast<int>(fm::cli::parseInt(a, v, 1, 10000));
+      else if (a == "--threads") threads = static_cast<int>(fm::cli::parseInt(a, v, 0, 1024));
+      else if (a == "--drive") drive = fm::cli::parseDouble(a, v, 0, 100000);
     }
-  }
-  if (out.empty() || n_frames < 1) {
-    std::cerr << "usage: tsdf_benchmark --out DIR [--frames N] [--threads T]\n";
+    if (out.empty()) throw fm::cli::UsageError("--out is required");
+    fm::cli::prepareOutputDir("--out", out);
+  } catch (const fm::cli::UsageError& e) {
+    std::cerr << "tsdf_benchmark: " << e.what() << "\n" << usage;
     return 2;
   }
   std::filesystem::create_directories(out);

@@ -1,0 +1,199 @@
+// Shared by the command-line tools (header-only, no ROS): strict parsing of
+// option values, checks of input files and output folders, and outputs written
+// under a temporary name and renamed over the old file only once complete.
+//
+// Every check throws cli::UsageError whose message names the option and the bad
+// value, e.g. "--frames needs a whole number, got 'abc'" or
+// "--every must lie in [1, 1000000], got -3"; a tool prints it after its own
+// name and exits 2.
+#ifndef FISHEYE_MAPPING_TOOLS_CLI_H_
+#define FISHEYE_MAPPING_TOOLS_CLI_H_
+
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <limits>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <system_error>
+#include <vector>
+
+#include <unistd.h>
+
+namespace fisheye_mapping {
+namespace cli {
+
+class UsageError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// Shortest text of a number that reads back the same ("1e+06" -> "1000000").
+inline std::string numberText(double v) {
+  std::ostringstream s;
+  s.precision(15);
+  s << v;
+  return s.str();
+}
+
+// A whole number in [lo, hi]: decimal digits with an optional sign, nothing
+// else (no "12abc", "1.5", " 7", "0x10", empty text).
+inline long long parseInt(const std::string& option, const std::string& text, long long lo, long long hi) {
+  const auto bad = [&]() { return UsageError(option + " needs a whole number, got '" + text + "'"); };
+  if (text.empty() || text.size() > 40) throw bad();
+  size_t i = (text[0] == '-' || text[0] == '+') ? 1 : 0;
+  if (i == text.size()) throw bad();
+  for (size_t k = i; k < text.size(); ++k) {
+    if (text[k] < '0' || text[k] > '9') throw bad();
+  }
+  errno = 0;
+  char* end = nullptr;
+  const long long v = std::strtoll(text.c_str(), &end, 10);
+  if (errno == ERANGE || v < lo || v > hi) {
+    throw UsageError(option + " must lie in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " + text);
+  }
+  return v;
+}
+
+// A finite number in [lo, hi] (decimal or exponent notation; no "nan", "inf",
+// trailing text or hexadecimal).
+inline double parseDouble(const std::string& option, const std::string& text, double lo, double hi) {
+  const auto bad = [&]() { return UsageError(option + " needs a number, got '" + text + "'"); };
+  if (text.empty() || text.size() > 64) throw bad();
+  for (char c : text) {
+    if (!((c >= '0' && c <= '9') || c == '.' || c == '-' || c == '+' || c == 'e' || c == 'E')) throw bad();
+  }
+  errno = 0;
+  char* end = nullptr;
+  const double v = std::strtod(text.c_str(), &end);
+  if (end == text.c_str() || *end != '\0') throw bad();
+  if (!std::isfinite(v) || errno == ERANGE || v < lo || v > hi) {
+    throw UsageError(option + " must lie in [" + numberText(lo) + ", " + numberText(hi) + "], got " + text);
+  }
+  return v;
+}
+
+// A number in (0, hi]: positive, finite.
+inline double parsePositive(const std::string& option, const std::string& text, double hi) {
+  const double v = parseDouble(option, text, -std::numeric_limits<double>::max(), hi);
+  if (!(v > 0.0)) throw UsageError(option + " must be positive, got " + text);
+  return v;
+}
+
+// Comma-separated numbers, each in [lo, hi]; at least one, at most max_count.
+inline std::vector<double> parseDoubleList(const std::string& option, const std::string& text, double lo, double hi,
+                                           size_t max_count = 100) {
+  std::vector<double> out;
+  if (text.empty()) throw UsageError(option + " needs a comma-separated list of numbers, got ''");
+  std::string item;
+  std::stringstream ss(text);
+  while (std::getline(ss, item, ',')) {
+    if (out.size() == max_count) {
+      throw UsageError(option + " takes at most " + std::to_string(max_count) + " values");
+    }
+    out.push_back(parseDouble(option, item, lo, hi));
+  }
+  if (!text.empty() && text.back() == ',') throw UsageError(option + " needs a number, got ''");
+  return out;
+}
+
+// "WxH" with both in [1, max_side].
+inline void parseSize(const std::string& option, const std::string& text, int max_side, int* w, int* h) {
+  const size_t x = text.find('x');
+  if (x == std::string::npos) throw UsageError(option + " needs WxH (e.g. 1280x800), got '" + text + "'");
+  try {
+    *w = static_cast<int>(parseInt(option, text.substr(0, x), 1, max_side));
+    *h = static_cast<int>(parseInt(option, text.substr(x + 1), 1, max_side));
+  } catch (const UsageError&) {
+    throw UsageError(option + " needs WxH with each side in [1, " + std::to_string(max_side) + "] pixels, got '" +
+                     text + "'");
+  }
+}
+
+// An input file: exists, is not a directory, can be opened for reading.
+inline void requireInputFile(const std::string& option, const std::string& path) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (path.empty()) throw UsageError(option + " needs a file name, got ''");
+  const fs::file_status st = fs::status(path, ec);
+  if (ec || !fs::exists(st)) throw UsageError(option + ": " + path + ": no such file");
+  if (fs::is_directory(st)) throw UsageError(option + ": " + path + " is a directory, expected a file");
+  std::ifstream f(path);
+  if (!f) throw UsageError(option + ": " + path + ": cannot open for reading");
+}
+
+// An output folder: created when missing (with its parents); an existing path
+// that is not a folder is an error, as is a folder we cannot write into.
+inline void prepareOutputDir(const std::string& option, const std::string& path) {
+  namespace fs = std::filesystem;
+  if (path.empty()) throw UsageError(option + " needs a folder name, got ''");
+  std::error_code ec;
+  if (fs::exists(path, ec) && !fs::is_directory(path, ec)) {
+    throw UsageError(option + ": " + path + " exists and is not a folder");
+  }
+  fs::create_directories(path, ec);
+  if (ec) throw UsageError(option + ": cannot create folder " + path + ": " + ec.message());
+  if (access(path.c_str(), W_OK) != 0) throw UsageError(option + ": cannot write into folder " + path);
+}
+
+// An output file: its folder must exist (nothing is created), the path must not
+// be a folder.
+inline void requireOutputFile(const std::string& option, const std::string& path) {
+  namespace fs = std::filesystem;
+  if (path.empty()) throw UsageError(option + " needs a file name, got ''");
+  std::error_code ec;
+  if (fs::is_directory(path, ec)) throw UsageError(option + ": " + path + " is a directory, expected a file");
+  const fs::path parent = fs::path(path).parent_path();
+  if (!parent.empty() && !fs::is_directory(parent, ec)) {
+    throw UsageError(option + ": " + path + ": no such folder " + parent.string());
+  }
+  if (access(parent.empty() ? "." : parent.c_str(), W_OK) != 0) {
+    throw UsageError(option + ": " + path + ": cannot write into folder " +
+                     (parent.empty() ? std::string(".") : parent.string()));
+  }
+}
+
+// Temporary name beside `path` (same folder, so the rename is atomic).
+inline std::string partialName(const std::string& path) {
+  return path + ".partial." + std::to_string(static_cast<long>(getpid()));
+}
+
+// Writes `path` through `write(tmp)` into a temporary file, then renames it over
+// `path`: a failed or interrupted write leaves the old file as it was and no
+// temporary behind. Throws std::runtime_error naming the file.
+inline void writeAtomically(const std::string& path, const std::function<void(const std::string& tmp)>& write) {
+  const std::string tmp = partialName(path);
+  try {
+    write(tmp);
+    std::error_code ec;
+    if (!std::filesystem::is_regular_file(tmp, ec)) throw std::runtime_error(path + ": nothing was written");
+    if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+      throw std::runtime_error(path + ": cannot rename the new file into place: " + std::strerror(errno));
+    }
+  } catch (...) {
+    std::remove(tmp.c_str());
+    throw;
+  }
+}
+
+// writeAtomically for text: `fill` writes into the stream; checked for errors.
+inline void writeTextAtomically(const std::string& path, const std::function<void(std::ostream&)>& fill) {
+  writeAtomically(path, [&](const std::string& tmp) {
+    std::ofstream f(tmp);
+    if (!f) throw std::runtime_error(path + ": cannot write: " + std::strerror(errno));
+    fill(f);
+    f.close();
+    if (!f) throw std::runtime_error(path + ": write failed (disk full?)");
+  });
+}
+
+}  // namespace cli
+}  // namespace fisheye_mapping
+
+#endif  // FISHEYE_MAPPING_TOOLS_CLI_H_

@@ -1,0 +1,144 @@
+// The shared option parsing of the tools (src/tools/cli.h) and the tools that
+// use it: every bad value is named with its option, gets exit status 2, and
+// the tool does no work.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <fstream>
+#include <string>
+
+#include "cli.h"
+
+namespace cli = fisheye_mapping::cli;
+
+namespace {
+
+struct ToolRun {
+  std::string out;
+  int status;
+};
+
+ToolRun run(const std::string& cmd) {
+  ToolRun r{"", -1};
+  FILE* p = popen((cmd + " 2>&1").c_str(), "r");
+  char buf[4096];
+  size_t n;
+  while ((n = fread(buf, 1, sizeof(buf), p)) > 0) r.out.append(buf, n);
+  const int st = pclose(p);
+  r.status = WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
+  return r;
+}
+
+template <typename F>
+std::string usageError(F f) {
+  try {
+    f();
+  } catch (const cli::UsageError& e) {
+    return e.what();
+  }
+  return "(no error)";
+}
+
+TEST(Cli, WholeNumbersAreStrict) {
+  EXPECT_EQ(cli::parseInt("--frames", "12", 1, 100), 12);
+  EXPECT_EQ(cli::parseInt("--n", "-3", -5, 5), -3);
+  EXPECT_EQ(usageError([] { cli::parseInt("--frames", "abc", 1, 100); }), "--frames needs a whole number, got 'abc'");
+  EXPECT_EQ(usageError([] { cli::parseInt("--frames", "12abc", 1, 100); }), "--frames needs a whole number, got '12abc'");
+  EXPECT_EQ(usageError([] { cli::parseInt("--frames", "1.5", 1, 100); }), "--frames needs a whole number, got '1.5'");
+  EXPECT_EQ(usageError([] { cli::parseInt("--frames", "", 1, 100); }), "--frames needs a whole number, got ''");
+  EXPECT_EQ(usageError([] { cli::parseInt("--frames", " 7", 1, 100); }), "--frames needs a whole number, got ' 7'");
+  EXPECT_EQ(usageError([] { cli::parseInt("--every", "-3", 1, 1000000); }), "--every must lie in [1, 1000000], got -3");
+  EXPECT_EQ(usageError([] { cli::parseInt("--n", "99999999999999999999999", 0, 10); }),
+            "--n must lie in [0, 10], got 99999999999999999999999");
+}
+
+TEST(Cli, NumbersAreFiniteAndInRange) {
+  EXPECT_DOUBLE_EQ(cli::parseDouble("--t", "0.25", 0, 1), 0.25);
+  EXPECT_DOUBLE_EQ(cli::parseDouble("--t", "1e-3", 0, 1), 1e-3);
+  EXPECT_EQ(usageError([] { cli::parseDouble("--t", "nan", 0, 1); }), "--t needs a number, got 'nan'");
+  EXPECT_EQ(usageError([] { cli::parseDouble("--t", "inf", 0, 1); }), "--t needs a number, got 'inf'");
+  EXPECT_EQ(usageError([] { cli::parseDouble("--t", "0x10", 0, 100); }), "--t needs a number, got '0x10'");
+  EXPECT_EQ(usageError([] { cli::parseDouble("--t", "1e999", 0, 1); }), "--t must lie in [0, 1], got 1e999");
+  EXPECT_EQ(usageError([] { cli::parseDouble("--t", "2", 0, 1); }), "--t must lie in [0, 1], got 2");
+  EXPECT_EQ(usageError([] { cli::parsePositive("--range", "0", 1e6); }), "--range must be positive, got 0");
+  EXPECT_EQ(cli::parseDoubleList("--t", "0.1,0.2", 0, 1).size(), 2u);
+  EXPECT_EQ(usageError([] { cli::parseDoubleList("--t", "0.1,,0.2", 0, 1); }), "--t needs a number, got ''");
+  EXPECT_EQ(usageError([] { cli::parseDoubleList("--t", "0.1,", 0, 1); }), "--t needs a number, got ''");
+  int w = 0, h = 0;
+  cli::parseSize("--size", "1280x800", 20000, &w, &h);
+  EXPECT_EQ(w, 1280);
+  EXPECT_EQ(h, 800);
+  EXPECT_EQ(usageError([&] { cli::parseSize("--size", "100000x100000", 20000, &w, &h); }),
+            "--size needs WxH with each side in [1, 20000] pixels, got '100000x100000'");
+  EXPECT_EQ(usageError([&] { cli::parseSize("--size", "1280x800x", 20000, &w, &h); }),
+            "--size needs WxH with each side in [1, 20000] pixels, got '1280x800x'");
+}
+
+TEST(Cli, FilesFoldersAndAtomicWrites) {
+  const std::string dir = "/tmp/fm_test_cli_" + std::to_string(getpid());
+  std::system(("rm -rf " + dir + " && mkdir -p " + dir).c_str());
+  EXPECT_EQ(usageError([&] { cli::requireInputFile("--bag", dir); }), "--bag: " + dir + " is a directory, expected a file");
+  EXPECT_EQ(usageError([&] { cli::requireInputFile("--bag", dir + "/x"); }), "--bag: " + dir + "/x: no such file");
+  EXPECT_EQ(usageError([&] { cli::requireOutputFile("--csv", dir + "/a/b.csv"); }),
+            "--csv: " + dir + "/a/b.csv: no such folder " + dir + "/a");
+  std::ofstream(dir + "/file") << "x";
+  EXPECT_EQ(usageError([&] { cli::prepareOutputDir("--out", dir + "/file"); }),
+            "--out: " + dir + "/file exists and is not a folder");
+  cli::prepareOutputDir("--out", dir + "/new/deep");
+  // A failed write keeps the old file and leaves no temporary.
+  std::ofstream(dir + "/keep.txt") << "old\n";
+  EXPECT_THROW(cli::writeAtomically(dir + "/keep.txt",
+                                    [](const std::string& tmp) {
+                                      std::ofstream(tmp) << "half";
+                                      throw std::runtime_error("failed");
+                                    }),
+               std::runtime_error);
+  std::ifstream keep(dir + "/keep.txt");
+  std::string line;
+  std::getline(keep, line);
+  EXPECT_EQ(line, "old");
+  EXPECT_FALSE(std::ifstream(cli::partialName(dir + "/keep.txt")).good());
+  // A writer that writes nothing does not count as written.
+  EXPECT_THROW(cli::writeAtomically(dir + "/none.txt", [](const std::string&) {}), std::runtime_error);
+  cli::writeTextAtomically(dir + "/keep.txt", [](std::ostream& f) { f << "new\n"; });
+  std::ifstream now(dir + "/keep.txt");
+  std::getline(now, line);
+  EXPECT_EQ(line, "new");
+  std::system(("rm -rf " + dir).c_str());
+}
+
+const std::string kRig = std::string(" --camchain ") + FM_CONFIG_DIR + "/rig/default_camchain.yaml --mount " +
+                         FM_CONFIG_DIR + "/rig/default_mount.yaml";
+
+TEST(ToolOptions, BadValuesAreNamedWithExitStatus2) {
+  const struct {
+    std::string cmd, expected;
+  } cases[] = {
+      {std::string(FM_TSDF_BENCHMARK) + " --out /tmp/x --frames abc", "tsdf_benchmark: --frames needs a whole number, got 'abc'"},
+      {std::string(FM_TSDF_BENCHMARK) + " --out /tmp/x --frames 0", "tsdf_benchmark: --frames must lie in [1, 10000], got 0"},
+      {std::string(FM_TSDF_BENCHMARK) + " --out /tmp/x --threads -1", "tsdf_benchmark: --threads must lie in [0, 1024], got -1"},
+      {std::string(FM_TSDF_BENCHMARK) + " --out /tmp/x --drive 1e9", "tsdf_benchmark: --drive must lie in [0, 100000], got 1e9"},
+      {std::string(FM_TSDF_BENCHMARK) + " --out /tmp/x --frames", "tsdf_benchmark: --frames needs a value"},
+      {std::string(FM_TSDF_BENCHMARK) + " --out /etc/hostname", "tsdf_benchmark: --out: /etc/hostname exists and is not a folder"},
+      {std::string(FM_DEPTH_BENCHMARK) + kRig + " --repeats 2x", "depth_benchmark: --repeats needs a whole number, got '2x'"},
+      {std::string(FM_DEPTH_BENCHMARK) + kRig + " --band-rows -4", "depth_benchmark: --band-rows must lie in [1, 20000], got -4"},
+      {std::string(FM_DEPTH_BENCHMARK) + kRig + " --repaets 2", "depth_benchmark: unknown argument '--repaets'"},
+      {std::string(FM_DEPTH_BENCHMARK) + " --camchain /tmp --mount /tmp", "depth_benchmark: --camchain: /tmp is a directory, expected a file"},
+      {std::string(FM_DETECTOR_BENCHMARK) + " --config " + FM_CONFIG_DIR + "/detector/nanodet.yaml" + kRig + " --repeats 0",
+       "detector_benchmark: --repeats must lie in [1, 10000], got 0"},
+      {std::string(FM_DETECTOR_BENCHMARK) + " --config /tmp" + kRig,
+       "detector_benchmark: --config: /tmp is a directory, expected a file"},
+      {std::string(FM_DETECT_IMAGE) + " --config /tmp x.png", "detect_image: --config: /tmp is a directory, expected a file"},
+      {std::string(FM_DETECT_IMAGE) + " --config " + FM_CONFIG_DIR + "/detector/nanodet.yaml --out-dir /tmp/fm_no_such_dir x.png",
+       "detect_image: --out-dir: /tmp/fm_no_such_dir: no such folder"},
+  };
+  for (const auto& c : cases) {
+    const ToolRun r = run(c.cmd);
+    EXPECT_EQ(r.status, 2) << c.cmd << "\n" << r.out;
+    EXPECT_NE(r.out.find(c.expected), std::string::npos) << c.cmd << "\n" << r.out;
+  }
+}
+
+}  // namespace
