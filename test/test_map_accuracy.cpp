@@ -73,6 +73,25 @@ TEST_F(MapAccuracy, GoodCloudsGiveHandCountedShares) {
   EXPECT_EQ(row, "0.1,nan,0.8,0.8,10,10,0");
 }
 
+TEST_F(MapAccuracy, AgainstAMeshWithTrails) {
+  // One triangle in z = 0 under all the map's points, and two points 1 m above it.
+  std::ofstream(dir_ + "/scene.ply") << "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n"
+                                        "property float y\nproperty float z\nelement face 1\n"
+                                        "property list uchar int vertex_indices\nend_header\n"
+                                        "-1 -1 0\n20 -1 0\n-1 20 0\n3 0 1 2\n";
+  std::vector<std::string> map;
+  for (int i = 0; i < 8; ++i) map.push_back(std::to_string(i) + " 0 0");
+  map.push_back("3 3 1");
+  map.push_back("4 4 1");
+  writePcd(dir_ + "/above.pcd", map);
+  const ToolRun r = run("--cloud " + dir_ + "/above.pcd --mesh " + dir_ + "/scene.ply --t 0.1 --trail-tol 0.5");
+  ASSERT_EQ(r.status, 0) << r.out;
+  EXPECT_NE(r.out.find("10 map points, 2 points farther than 0.500000 m from the scene (trail voxels)\n"),
+            std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("| 0.10 | 80.0 % |"), std::string::npos) << r.out;
+}
+
 TEST_F(MapAccuracy, EmptyPcdIsAnErrorNotACrash) {
   std::ofstream(dir_ + "/empty.pcd").close();
   ToolRun r = run("--cloud " + dir_ + "/empty.pcd --ref " + dir_ + "/ref.pcd");
@@ -82,6 +101,10 @@ TEST_F(MapAccuracy, EmptyPcdIsAnErrorNotACrash) {
   r = run("--cloud " + dir_ + "/map.pcd --ref " + dir_ + "/empty.pcd");
   EXPECT_EQ(r.status, 1) << r.out;
   EXPECT_NE(r.out.find(dir_ + "/empty.pcd is empty (0 bytes)"), std::string::npos) << r.out;
+  r = run("--cloud " + dir_ + "/map.pcd --mesh " + dir_ + "/empty.pcd");
+  EXPECT_EQ(r.status, 1) << r.out;
+  EXPECT_NE(r.out.find("map_accuracy: " + dir_ + "/empty.pcd is empty (0 bytes), not a PLY mesh"), std::string::npos)
+      << r.out;
   // A header without points.
   writePcd(dir_ + "/none.pcd", {});
   r = run("--cloud " + dir_ + "/none.pcd --ref " + dir_ + "/ref.pcd");

@@ -131,6 +131,7 @@ TEST(ToolOptions, BadValuesAreNamedWithExitStatus2) {
       {std::string(FM_DETECTOR_BENCHMARK) + " --config /tmp" + kRig,
        "detector_benchmark: --config: /tmp is a directory, expected a file"},
       {std::string(FM_DETECT_IMAGE) + " --config /tmp x.png", "detect_image: --config: /tmp is a directory, expected a file"},
+      {std::string(FM_DETECT_IMAGE) + " x.png --config", "detect_image: --config needs a value"},
       {std::string(FM_DETECT_IMAGE) + " --config " + FM_CONFIG_DIR + "/detector/nanodet.yaml --out-dir /tmp/fm_no_such_dir x.png",
        "detect_image: --out-dir: /tmp/fm_no_such_dir: no such folder"},
   };

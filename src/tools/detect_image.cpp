@@ -27,7 +27,10 @@ int main(int argc, char** argv) {
     else if (a == "--out-dir" && i + 1 < argc) out_dir = argv[++i];
     else if (a == "--all-classes") all = true;
     else if (a == "--grey") grey = true;
-    else if (!a.empty() && a[0] == '-') {
+    else if (a == "--config" || a == "--out-dir") {
+      std::cerr << "detect_image: " << a << " needs a value\n";
+      return 2;
+    } else if (!a.empty() && a[0] == '-') {
       std::cerr << "usage: detect_image --config YAML [--all-classes] [--grey] [--out-dir DIR] IMAGE...\n";
       return 2;
     } else images.push_back(a);

@@ -113,6 +113,9 @@ int main(int argc, char** argv) {
     std::vector<float> acc_mesh, acc_ref, comp_ref;
     std::size_t trails = 0;
     if (!mesh_path.empty()) {
+      std::error_code ec;
+      if (std::filesystem::file_size(mesh_path, ec) == 0 && !ec)
+        throw std::runtime_error(mesh_path + " is empty (0 bytes), not a PLY mesh");
       const auto gt = fm::MeshDistance::fromPly(mesh_path, tmax);
       acc_mesh.resize(map.p.size());
 #pragma omp parallel for
