@@ -2,6 +2,7 @@
 // geometry, filters, support-view selection, bad input, and whole sweeps of a
 // rendered synthetic street (exact ground truth) on both backends.
 #include <cmath>
+#include <limits>
 #include <iostream>
 #include <tuple>
 #include <random>
@@ -643,6 +644,41 @@ TEST(PlaneSweepAccuracy, NarrowCameraCloseToTheReferenceNeverMakesDepthWorse) {
   EXPECT_GE(e_with.coverage(), e_without.coverage());
   // Forced in (printed above) it makes this street's depth slightly worse;
   // on a real rig with its narrow camera (issue 13) much worse.
+}
+
+TEST_F(PlaneSweepScene, NonFiniteFloatPixelsAreMaskedWithAWarning) {
+  // A float reference image with a NaN band and an infinite pixel: those
+  // pixels (and the band) get no depth, the rest as from the 8-bit image, and
+  // the result says how many were masked.
+  fm::PlaneSweepConfig c = config("native", "full");
+  fm::PlaneSweep sweep(c);
+  cv::Mat ref;
+  images_[0].convertTo(ref, CV_32F, 1.0 / 255);
+  ref.rowRange(100, 110).setTo(NAN);
+  ref.at<float>(20, 30) = std::numeric_limits<float>::infinity();
+  const std::vector<fm::SweepView> supports = {fm::rigSweepView(*rig_, 1, 0, images_[1]),
+                                               fm::rigSweepView(*rig_, 2, 0, images_[2])};
+  const Eigen::Isometry3d T_base_ref = rig_->cameras[0].T_base_cam;
+  const fm::DepthResult r = sweep.compute(fm::rigSweepView(*rig_, 0, 0, ref), supports, &T_base_ref);
+  ASSERT_EQ(r.warnings.size(), 1u);
+  EXPECT_EQ(r.warnings[0], "cam0: " + std::to_string(10 * ref.cols + 1) + " non-finite pixels (NaN or infinite) treated as masked");
+  EXPECT_EQ(cv::countNonZero(r.raw_depth.rowRange(100, 110) == r.raw_depth.rowRange(100, 110)), 0);
+  EXPECT_TRUE(std::isnan(r.raw_depth.at<float>(20, 30)));
+  const fm::DepthResult plain = sweep.compute(fm::rigSweepView(*rig_, 0, 0, images_[0]), supports, &T_base_ref);
+  EXPECT_TRUE(plain.warnings.empty());
+  const int valid = cv::countNonZero(r.raw_depth == r.raw_depth), valid_plain = cv::countNonZero(plain.raw_depth == plain.raw_depth);
+  EXPECT_GT(valid_plain, 2000);
+  // At most the band and the rows whose 9x9 windows reach it (and the
+  // infinite pixel's window) are lost.
+  EXPECT_GE(valid, valid_plain - (10 + 2 * 4) * ref.cols - 81) << valid << " vs " << valid_plain;
+  // No finite pixel at all: a clear error naming the view.
+  ref.setTo(NAN);
+  try {
+    sweep.compute(fm::rigSweepView(*rig_, 0, 0, ref), supports, &T_base_ref);
+    FAIL() << "no error for an all-NaN image";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_STREQ(e.what(), "cam0: image has no finite pixel (all NaN or infinite)");
+  }
 }
 
 TEST_P(PlaneSweepBackends, SelfMaskedPixelsHaveNoDepth) {

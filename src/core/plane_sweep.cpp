@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <sstream>
 #include <stdexcept>
 
@@ -60,6 +61,27 @@ cv::Mat checkedMask(const SweepView& view) {
   }
   checkSize(view, view.mask, "self-mask");
   return view.mask;
+}
+
+// 255 where a float image is NaN or infinite (empty for other types); throws
+// when no pixel is finite.
+cv::Mat nonFinite(const SweepView& view, std::vector<std::string>* warnings) {
+  if (view.image.type() != CV_32FC1) return cv::Mat();
+  cv::Mat finite = (view.image == view.image) & (cv::abs(view.image) < std::numeric_limits<float>::infinity());
+  const int bad = static_cast<int>(view.image.total()) - cv::countNonZero(finite);
+  if (bad == static_cast<int>(view.image.total())) {
+    throw std::invalid_argument(view.name + ": image has no finite pixel (all NaN or infinite)");
+  }
+  if (bad > 0 && warnings) {
+    warnings->push_back(view.name + ": " + std::to_string(bad) + " non-finite pixels (NaN or infinite) treated as masked");
+  }
+  return finite == 0;
+}
+
+// The view's self-mask with its non-finite pixels added.
+cv::Mat maskWithNonFinite(const cv::Mat& mask, const SweepView& view, std::vector<std::string>* warnings) {
+  const cv::Mat bad = nonFinite(view, warnings);
+  return bad.empty() ? mask : cv::Mat(mask | bad);
 }
 
 void checkImage(const SweepView& view) {
@@ -186,7 +208,9 @@ cv::Mat toSweepImage(const cv::Mat& image, const std::string& what) {
       break;
     case CV_32FC1:
       grey = image.clone();
-      cv::patchNaNs(grey, 0.0);
+      // NaN and +-inf to 0 (compute() masks them): one infinite pixel would
+      // poison every window sum it slides through.
+      grey.setTo(0.0f, ~((grey == grey) & (cv::abs(grey) < std::numeric_limits<float>::infinity())));
       break;
     default:
       throw std::invalid_argument(what + ": unsupported image type (expected 8-bit grey/BGR/BGRA, 16-bit grey or float)");
@@ -444,12 +468,12 @@ DepthResult PlaneSweep::compute(const SweepView& ref, const std::vector<SweepVie
                                 const Eigen::Isometry3d* T_base_ref) {
   const auto t0 = std::chrono::steady_clock::now();
   checkImage(ref);
-  const cv::Mat ref_mask = checkedMask(ref);
   for (const auto& s : supports) {
     checkImage(s);
     checkedMask(s);
   }
   DepthResult result;
+  const cv::Mat ref_mask = maskWithNonFinite(checkedMask(ref), ref, &result.warnings);
   std::vector<int> used = selectSupportViews(config_, ref.camera, supports, &result.dropped_views);
   if (used.size() > FM_SWEEP_MAX_VIEWS) {
     throw std::invalid_argument("too many supporting views: " + std::to_string(used.size()) + " > " +
@@ -466,7 +490,7 @@ DepthResult PlaneSweep::compute(const SweepView& ref, const std::vector<SweepVie
     std::vector<cv::Mat> img_full, mask_full;
     for (int i : used) {
       img_full.push_back(toSweepImage(supports[i].image, supports[i].name));
-      mask_full.push_back(checkedMask(supports[i]));
+      mask_full.push_back(maskWithNonFinite(checkedMask(supports[i]), supports[i], &result.warnings));
     }
     // One scale: slot 0 full view, 1 half view, 2 full-resolution crop.
     auto run = [&](int slot, cv::Mat* range, cv::Mat* cost, cv::Mat* ratio, cv::Mat* texture) {

@@ -222,6 +222,7 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
       const Eigen::Isometry3d T_base_ref = rig_.cameras[ref_].T_base_cam;
       const DepthResult r = sweep_->compute(ref, views, &T_base_ref);
       if (!r.dropped_views.empty()) NODELET_INFO_ONCE("supporting view dropped: %s", r.dropped_views.front().c_str());
+      for (const auto& w : r.warnings) NODELET_WARN_THROTTLE(10.0, "frame %.3f: %s", ref_img->header.stamp.toSec(), w.c_str());
       std_msgs::Header header = ref_img->header;
       if (header.frame_id.empty()) header.frame_id = rig_.cameras[ref_].frame_id;
       depth_pub_.publish(cv_bridge::CvImage(header, enc::TYPE_32FC1, r.depth).toImageMsg());

@@ -154,6 +154,7 @@ int main(int argc, char** argv) {
       }
       const fm::DepthResult r = sweep.compute(fm::rigSweepView(rig, ref, ref, img[ref], mask[ref]), views, &T_base_ref);
       for (const auto& d : r.dropped_views) std::cerr << "plane_sweep_depth: dropped " << d << "\n";
+      for (const auto& w : r.warnings) std::cerr << "plane_sweep_depth: warning: " << w << "\n";
       writeOutputs(one["out"], r, config);
       std::cout << "depth: " << cv::countNonZero(r.depth == r.depth) << " valid pixels of " << r.depth.total() << ", "
                 << std::fixed << std::setprecision(1) << r.total_ms << " ms; wrote " << one["out"]

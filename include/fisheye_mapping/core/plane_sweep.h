@@ -133,6 +133,7 @@ struct DepthResult {
   cv::Mat texture;     // reference window std / sensor noise std, NaN where none
   std::vector<std::string> used_views;     // supporting views matched
   std::vector<std::string> dropped_views;  // "<name>: reason"
+  std::vector<std::string> warnings;       // "<name>: ..." (e.g. non-finite pixels of float images, masked)
   double sweep_ms = 0.0;   // all scales, including transfers
   double filter_ms = 0.0;
   double total_ms = 0.0;
@@ -216,8 +217,10 @@ class PlaneSweep {
   // ref.T_ref_view is ignored (identity). T_base_ref (reference camera ->
   // base frame) places the ground planes; nullptr sweeps fronto-parallel
   // planes only. Throws std::invalid_argument naming the view for images that
-  // do not match their camera, masks of the wrong size or type, or more than
-  // FM_SWEEP_MAX_VIEWS supporting views.
+  // do not match their camera, masks of the wrong size or type, float images
+  // with no finite pixel, or more than FM_SWEEP_MAX_VIEWS supporting views.
+  // NaN / infinite pixels of float images are masked (result.warnings says
+  // how many).
   DepthResult compute(const SweepView& ref, const std::vector<SweepView>& supports,
                       const Eigen::Isometry3d* T_base_ref);
 
