@@ -74,6 +74,10 @@ TEST(PlaneSweepTool, ImagesToDepthTiff) {
   EXPECT_NE(out.find("unknown camera 'cam9'"), std::string::npos) << out;
   EXPECT_EQ(run(kRig + " --image cam0=" + dir + "/cam0.png --set window_full=4 --out " + dir + "/g", &out), 1);
   EXPECT_NE(out.find("window_full"), std::string::npos) << out;
+  EXPECT_EQ(run(kRig + " --image cam0=" + dir + "/cam0.png --set fronto_planes=abc --out " + dir + "/g", &out), 1);
+  EXPECT_NE(out.find("--set: parameter 'fronto_planes' has the wrong type"), std::string::npos) << out;
+  EXPECT_EQ(run(kRig + " --image cam0=" + dir + "/cam0.png --set fronto_plane=3 --out " + dir + "/g", &out), 1);
+  EXPECT_NE(out.find("unknown parameter 'fronto_plane'"), std::string::npos) << out;
   EXPECT_EQ(run(kRig + " --out " + dir + "/g", &out), 2);
   std::filesystem::remove_all(dir);
 }
