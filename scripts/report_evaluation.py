@@ -209,7 +209,7 @@ def main():
                 rows = read_csv(acc)
                 a_acc, a_comp = at(rows, 0.1, "accuracy"), at(rows, 0.25, "completeness")
             real_rows.append(f"| {preset} | {label} | {float(veh['calibration_error_deg']):.2f} | "
-                             f"{pct(veh['sky_share'])} | {100 * float(veh['rel_median_20m']):.2f} % | "
+                             f"{100 * float(veh['sky_share']):.2f} % | {100 * float(veh['rel_median_20m']):.2f} % | "
                              f"{pct(veh['coverage_20m'])} | {pct(a_acc)} | {pct(a_comp)} | "
                              f"{float(veh['ms_texture']):.0f} / {float(veh['ms_no_texture']):.0f} |")
     if real_rows:
