@@ -11,23 +11,13 @@
 #include <string>
 #include <vector>
 
+#include "tool_run.h"
+
 namespace {
 
-struct ToolRun {
-  std::string out;
-  int status;
-};
+using fisheye_mapping::test::ToolRun;
 
-ToolRun run(const std::string& args) {
-  ToolRun r{"", -1};
-  FILE* p = popen((std::string(FM_MAP_ACCURACY) + " " + args + " 2>&1").c_str(), "r");
-  char buf[4096];
-  size_t n;
-  while ((n = fread(buf, 1, sizeof(buf), p)) > 0) r.out.append(buf, n);
-  const int st = pclose(p);
-  r.status = WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
-  return r;
-}
+ToolRun run(const std::string& args) { return fisheye_mapping::test::runTool(std::string(FM_MAP_ACCURACY) + " " + args); }
 
 // An ASCII PCD of points given as "x y z" lines (nan allowed).
 void writePcd(const std::string& path, const std::vector<std::string>& points) {

@@ -10,26 +10,15 @@
 #include <string>
 
 #include "cli.h"
+#include "tool_run.h"
 
 namespace cli = fisheye_mapping::cli;
 
 namespace {
 
-struct ToolRun {
-  std::string out;
-  int status;
-};
-
-ToolRun run(const std::string& cmd) {
-  ToolRun r{"", -1};
-  FILE* p = popen((cmd + " 2>&1").c_str(), "r");
-  char buf[4096];
-  size_t n;
-  while ((n = fread(buf, 1, sizeof(buf), p)) > 0) r.out.append(buf, n);
-  const int st = pclose(p);
-  r.status = WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
-  return r;
-}
+using fisheye_mapping::test::ToolRun;
+using fisheye_mapping::test::runTool;
+ToolRun run(const std::string& cmd) { return runTool(cmd); }
 
 template <typename F>
 std::string usageError(F f) {

@@ -104,16 +104,6 @@ void windowStats(const cv::Mat& img, int radius, cv::Mat* mean, cv::Mat* stddev)
   cv::sqrt(*stddev, *stddev);
 }
 
-// 255 where a ray table (3 floats per pixel, zero = masked / invalid) has a ray.
-cv::Mat raysValid(const std::vector<float>& rays, int width, int height) {
-  cv::Mat valid(height, width, CV_8UC1);
-  for (int i = 0; i < width * height; ++i) {
-    const float* ray = rays.data() + 3 * i;
-    valid.data[i] = (ray[0] != 0.0f || ray[1] != 0.0f || ray[2] != 0.0f) ? 255 : 0;
-  }
-  return valid;
-}
-
 }  // namespace
 
 void DepthFilterConfig::validate() const {
@@ -452,9 +442,11 @@ const std::vector<float>& PlaneSweep::raysFor(int slot, const CameraModel& camer
   if (cache.rays.empty() || std::memcmp(&params, &cache.camera, sizeof(params)) != 0 || !same_mask) {
     const std::vector<Eigen::Vector3f> rays = pixelRays(camera);
     cache.rays.assign(3 * rays.size(), 0.0f);
+    cache.valid = cv::Mat::zeros(camera.height(), camera.width(), CV_8UC1);
     for (size_t i = 0; i < rays.size(); ++i) {
       if (!rays[i].allFinite() || mask.data[i] != 0) continue;
       for (int a = 0; a < 3; ++a) cache.rays[3 * i + a] = rays[i][a];
+      cache.valid.data[i] = 255;
     }
     cache.camera = params;
     cache.mask = mask.clone();
@@ -523,7 +515,7 @@ DepthResult PlaneSweep::compute(const SweepView& ref, const std::vector<SweepVie
       windowStats(ref_img, level.radius, &level.ref_mean, &level.ref_std);
       // Texture against this scale's own noise (averaging to half resolution
       // halves it), over the pixels with a ray that is not masked.
-      const cv::Mat valid = raysValid(*level.rays, level.width, level.height);
+      const cv::Mat& valid = rays_[slot].valid;
       const double noise = std::max(estimateNoiseStd(ref_img, valid), config_.filters.min_noise_std);
       level.ref_std.convertTo(*texture, CV_32F, 1.0 / noise);
       texture->setTo(NAN, valid == 0);
@@ -577,8 +569,8 @@ DepthResult PlaneSweep::compute(const SweepView& ref, const std::vector<SweepVie
     // Textureless regions (sky, blank walls): a window that reaches across
     // their edge matches the edge, so the whole region goes, grown by 2 px.
     unsigned full_version = 0;
-    const std::vector<float>& full_rays = raysFor(0, ref.camera, ref_mask, &full_version);
-    const cv::Mat region = texturelessRegions(ref_full, raysValid(full_rays, W, H), config_.filters.min_texture_snr,
+    raysFor(0, ref.camera, ref_mask, &full_version);
+    const cv::Mat region = texturelessRegions(ref_full, rays_[0].valid, config_.filters.min_texture_snr,
                                               config_.filters.min_noise_std, config_.window_full);
     result.texture.setTo(0.0f, region);
     // The depth range is a range along the ray, like the output.

@@ -234,6 +234,7 @@ class PlaneSweep {
     FmCameraT<float> camera{};
     cv::Mat mask;
     std::vector<float> rays;
+    cv::Mat valid;  // CV_8UC1, 255 where `rays` has a ray (not masked, in the image)
     unsigned version = 0;
   };
   RayCache rays_[3];
