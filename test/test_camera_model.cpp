@@ -6,7 +6,7 @@
 
 #include <gtest/gtest.h>
 
-#include "fisheye_mapping/core/camera_model.h"
+#include "fisheye_mapping/core/camera/camera_model.h"
 #include "test_utils.h"
 
 namespace fisheye_mapping {

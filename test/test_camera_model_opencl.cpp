@@ -6,7 +6,7 @@
 
 #include <gtest/gtest.h>
 
-#include "fisheye_mapping/core/opencl_context.h"
+#include "fisheye_mapping/core/common/opencl_context.h"
 #include "test_utils.h"
 
 namespace fisheye_mapping {

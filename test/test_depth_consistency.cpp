@@ -17,7 +17,7 @@
 
 #include <opencv2/core.hpp>
 
-#include "fisheye_mapping/core/depth_consistency.h"
+#include "fisheye_mapping/core/eval/depth_consistency.h"
 #include "test_utils.h"
 
 namespace fisheye_mapping {

@@ -4,7 +4,7 @@
 #include <cmath>
 #include <string>
 
-#include "fisheye_mapping/core/depth_mask.h"
+#include "fisheye_mapping/core/detection/depth_mask.h"
 
 using namespace fisheye_mapping;
 
@@ -121,7 +121,7 @@ TEST(StampPairer, BoundedQueues) {
   EXPECT_EQ(*out[0].dets, 19);
 }
 
-#include "fisheye_mapping/core/mesh_distance.h"
+#include "fisheye_mapping/core/eval/mesh_distance.h"
 
 TEST(MeshDistance, PointToTriangleByHand) {
   // One right triangle in z = 0 with legs of 1 m along x and y, and a far one.

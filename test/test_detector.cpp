@@ -14,7 +14,7 @@
 #include <string>
 #include <vector>
 
-#include "fisheye_mapping/core/detector.h"
+#include "fisheye_mapping/core/detection/detector.h"
 
 using namespace fisheye_mapping;
 

@@ -4,7 +4,7 @@
 
 #include <stdexcept>
 
-#include "fisheye_mapping/core/frame_pacer.h"
+#include "fisheye_mapping/core/sync/frame_pacer.h"
 
 namespace fm = fisheye_mapping;
 using Step = fm::FramePacer::Step;

@@ -3,7 +3,7 @@
 
 #include <string>
 
-#include "fisheye_mapping/core/frame_sync.h"
+#include "fisheye_mapping/core/sync/frame_sync.h"
 
 using namespace fisheye_mapping;
 

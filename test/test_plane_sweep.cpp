@@ -10,10 +10,11 @@
 #include <gtest/gtest.h>
 #include <opencv2/imgproc.hpp>
 
-#include "fisheye_mapping/core/depth_image.h"
-#include "fisheye_mapping/core/opencl_context.h"
-#include "fisheye_mapping/core/plane_sweep.h"
-#include "fisheye_mapping/core/synthetic_world.h"
+#include "fisheye_mapping/core/depth/depth_image.h"
+#include "fisheye_mapping/core/eval/depth_error.h"
+#include "fisheye_mapping/core/common/opencl_context.h"
+#include "fisheye_mapping/core/depth/plane_sweep.h"
+#include "fisheye_mapping/core/sim/synthetic_world.h"
 
 namespace fm = fisheye_mapping;
 

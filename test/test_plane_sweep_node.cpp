@@ -8,9 +8,10 @@
 #include <sensor_msgs/image_encodings.h>
 
 #include "fisheye_mapping/CameraFrameSet.h"
-#include "fisheye_mapping/core/depth_image.h"
-#include "fisheye_mapping/core/rig.h"
-#include "fisheye_mapping/core/synthetic_world.h"
+#include "fisheye_mapping/core/depth/depth_image.h"
+#include "fisheye_mapping/core/eval/depth_error.h"
+#include "fisheye_mapping/core/camera/rig.h"
+#include "fisheye_mapping/core/sim/synthetic_world.h"
 #include "ros_test_utils.h"
 
 namespace fm = fisheye_mapping;

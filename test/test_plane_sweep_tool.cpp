@@ -12,9 +12,10 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
-#include "fisheye_mapping/core/depth_image.h"
-#include "fisheye_mapping/core/rig.h"
-#include "fisheye_mapping/core/synthetic_world.h"
+#include "fisheye_mapping/core/depth/depth_image.h"
+#include "fisheye_mapping/core/eval/depth_error.h"
+#include "fisheye_mapping/core/camera/rig.h"
+#include "fisheye_mapping/core/sim/synthetic_world.h"
 
 namespace fm = fisheye_mapping;
 

@@ -9,7 +9,7 @@
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 
-#include "fisheye_mapping/core/rig.h"
+#include "fisheye_mapping/core/camera/rig.h"
 #include "test_utils.h"
 
 namespace fisheye_mapping {

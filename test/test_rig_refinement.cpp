@@ -19,8 +19,8 @@
 #include <rosbag/bag.h>
 #include <sensor_msgs/Image.h>
 
-#include "fisheye_mapping/core/rig_refinement.h"
-#include "fisheye_mapping/core/synthetic_world.h"
+#include "fisheye_mapping/core/camera/rig_refinement.h"
+#include "fisheye_mapping/core/sim/synthetic_world.h"
 
 namespace fm = fisheye_mapping;
 

@@ -23,10 +23,10 @@
 #include <opencv2/imgproc.hpp>
 
 #include "fisheye_mapping/Detection2DArray.h"
-#include "fisheye_mapping/core/tsdf_map.h"
-#include "fisheye_mapping/core/tsdf_mesher.h"
-#include "fisheye_mapping/core/rig.h"
-#include "fisheye_mapping/core/synthetic_world.h"
+#include "fisheye_mapping/core/tsdf/tsdf_map.h"
+#include "fisheye_mapping/core/tsdf/tsdf_mesher.h"
+#include "fisheye_mapping/core/camera/rig.h"
+#include "fisheye_mapping/core/sim/synthetic_world.h"
 
 namespace fm = fisheye_mapping;
 using fm::synth::World;

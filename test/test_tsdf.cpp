@@ -8,10 +8,10 @@
 
 #include <gtest/gtest.h>
 
-#include "fisheye_mapping/core/analytic_scene.h"
-#include "fisheye_mapping/core/opencl_context.h"
-#include "fisheye_mapping/core/tsdf_map.h"
-#include "fisheye_mapping/core/tsdf_mesher.h"
+#include "fisheye_mapping/core/sim/analytic_scene.h"
+#include "fisheye_mapping/core/common/opencl_context.h"
+#include "fisheye_mapping/core/tsdf/tsdf_map.h"
+#include "fisheye_mapping/core/tsdf/tsdf_mesher.h"
 #include "test_utils.h"
 
 namespace fisheye_mapping {

@@ -18,8 +18,8 @@
 #include <visualization_msgs/MarkerArray.h>
 
 #include "fisheye_mapping/FilePath.h"
-#include "fisheye_mapping/core/analytic_scene.h"
-#include "fisheye_mapping/core/rig.h"
+#include "fisheye_mapping/core/sim/analytic_scene.h"
+#include "fisheye_mapping/core/camera/rig.h"
 #include "ros_test_utils.h"
 
 namespace fm = fisheye_mapping;

@@ -27,9 +27,9 @@
 
 #include "fisheye_mapping/FilePath.h"
 #include "fisheye_mapping/FrameDone.h"
-#include "fisheye_mapping/core/analytic_scene.h"
-#include "fisheye_mapping/core/rig.h"
-#include "fisheye_mapping/core/tsdf_map.h"
+#include "fisheye_mapping/core/sim/analytic_scene.h"
+#include "fisheye_mapping/core/camera/rig.h"
+#include "fisheye_mapping/core/tsdf/tsdf_map.h"
 #include "ros_test_utils.h"
 
 namespace fm = fisheye_mapping;

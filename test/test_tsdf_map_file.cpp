@@ -21,8 +21,8 @@
 
 #include <gtest/gtest.h>
 
-#include "fisheye_mapping/core/analytic_scene.h"
-#include "fisheye_mapping/core/tsdf_map.h"
+#include "fisheye_mapping/core/sim/analytic_scene.h"
+#include "fisheye_mapping/core/tsdf/tsdf_map.h"
 #include "test_utils.h"
 
 namespace fisheye_mapping {

@@ -7,7 +7,7 @@
 #include <utility>
 #include <vector>
 
-#include "fisheye_mapping/core/camera_model.h"
+#include "fisheye_mapping/core/camera/camera_model.h"
 
 namespace fisheye_mapping {
 namespace test {

@@ -21,7 +21,7 @@
 #include <string>
 
 #include "fisheye_mapping/CameraFrameSet.h"
-#include "fisheye_mapping/core/mesh_distance.h"
+#include "fisheye_mapping/core/eval/mesh_distance.h"
 #include "ros_test_utils.h"
 
 namespace fm = fisheye_mapping;

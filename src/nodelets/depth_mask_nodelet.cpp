@@ -40,9 +40,9 @@
 #include <sensor_msgs/image_encodings.h>
 
 #include "fisheye_mapping/Detection2DArray.h"
-#include "fisheye_mapping/core/depth_image.h"
-#include "fisheye_mapping/core/depth_mask.h"
-#include "fisheye_mapping/core/frame_sync.h"
+#include "fisheye_mapping/core/depth/depth_image.h"
+#include "fisheye_mapping/core/detection/depth_mask.h"
+#include "fisheye_mapping/core/sync/frame_sync.h"
 #include "fisheye_mapping/ros/stage_health.h"
 
 namespace fisheye_mapping {

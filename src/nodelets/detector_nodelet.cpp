@@ -31,8 +31,8 @@
 #include <sensor_msgs/image_encodings.h>
 
 #include "fisheye_mapping/Detection2DArray.h"
-#include "fisheye_mapping/core/detector.h"
-#include "fisheye_mapping/core/frame_sync.h"
+#include "fisheye_mapping/core/detection/detector.h"
+#include "fisheye_mapping/core/sync/frame_sync.h"
 #include "fisheye_mapping/ros/stage_health.h"
 
 namespace fisheye_mapping {

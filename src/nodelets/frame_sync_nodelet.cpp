@@ -31,7 +31,7 @@
 #include <sensor_msgs/image_encodings.h>
 
 #include "fisheye_mapping/CameraFrameSet.h"
-#include "fisheye_mapping/core/frame_sync.h"
+#include "fisheye_mapping/core/sync/frame_sync.h"
 #include "fisheye_mapping/ros/ros_params.h"
 #include "fisheye_mapping/ros/stage_health.h"
 

@@ -35,8 +35,8 @@
 
 #include "fisheye_mapping/CameraFrameSet.h"
 #include "fisheye_mapping/PlaneSweepFiltersConfig.h"
-#include "fisheye_mapping/core/plane_sweep.h"
-#include "fisheye_mapping/core/frame_sync.h"
+#include "fisheye_mapping/core/depth/plane_sweep.h"
+#include "fisheye_mapping/core/sync/frame_sync.h"
 #include "fisheye_mapping/ros/ros_params.h"
 #include "fisheye_mapping/ros/stage_health.h"
 

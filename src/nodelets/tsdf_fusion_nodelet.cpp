@@ -46,8 +46,8 @@
 
 #include "fisheye_mapping/FilePath.h"
 #include "fisheye_mapping/FrameDone.h"
-#include "fisheye_mapping/core/tsdf_map.h"
-#include "fisheye_mapping/core/tsdf_mesher.h"
+#include "fisheye_mapping/core/tsdf/tsdf_map.h"
+#include "fisheye_mapping/core/tsdf/tsdf_mesher.h"
 #include "fisheye_mapping/ros/ros_params.h"
 
 namespace fisheye_mapping {

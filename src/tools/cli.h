@@ -6,8 +6,8 @@
 // value, e.g. "--frames needs a whole number, got 'abc'" or
 // "--every must lie in [1, 1000000], got -3"; a tool prints it after its own
 // name and exits 2.
-#ifndef FISHEYE_MAPPING_TOOLS_CLI_H_
-#define FISHEYE_MAPPING_TOOLS_CLI_H_
+#ifndef FISHEYE_MAPPING_SRC_TOOLS_CLI_H_
+#define FISHEYE_MAPPING_SRC_TOOLS_CLI_H_
 
 #include <cerrno>
 #include <cmath>
@@ -196,4 +196,4 @@ inline void writeTextAtomically(const std::string& path, const std::function<voi
 }  // namespace cli
 }  // namespace fisheye_mapping
 
-#endif  // FISHEYE_MAPPING_TOOLS_CLI_H_
+#endif  // FISHEYE_MAPPING_SRC_TOOLS_CLI_H_

@@ -26,9 +26,9 @@
 #include <string>
 
 #include "cli.h"
-#include "fisheye_mapping/core/opencl_context.h"
-#include "fisheye_mapping/core/plane_sweep.h"
-#include "fisheye_mapping/core/synthetic_world.h"
+#include "fisheye_mapping/core/common/opencl_context.h"
+#include "fisheye_mapping/core/depth/plane_sweep.h"
+#include "fisheye_mapping/core/sim/synthetic_world.h"
 
 namespace fm = fisheye_mapping;
 

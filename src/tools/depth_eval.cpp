@@ -41,11 +41,12 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "fisheye_mapping/core/depth_consistency.h"
-#include "fisheye_mapping/core/depth_image.h"
-#include "fisheye_mapping/core/plane_sweep.h"
-#include "fisheye_mapping/core/rig.h"
-#include "fisheye_mapping/core/synthetic_world.h"
+#include "fisheye_mapping/core/eval/depth_consistency.h"
+#include "fisheye_mapping/core/depth/depth_image.h"
+#include "fisheye_mapping/core/eval/depth_error.h"
+#include "fisheye_mapping/core/depth/plane_sweep.h"
+#include "fisheye_mapping/core/camera/rig.h"
+#include "fisheye_mapping/core/sim/synthetic_world.h"
 
 namespace fm = fisheye_mapping;
 

@@ -12,7 +12,7 @@
 #include <vector>
 
 #include "cli.h"
-#include "fisheye_mapping/core/detector.h"
+#include "fisheye_mapping/core/detection/detector.h"
 
 namespace fm = fisheye_mapping;
 namespace cli = fm::cli;

@@ -18,9 +18,9 @@
 #include <vector>
 
 #include "cli.h"
-#include "fisheye_mapping/core/detector.h"
-#include "fisheye_mapping/core/rig.h"
-#include "fisheye_mapping/core/synthetic_world.h"
+#include "fisheye_mapping/core/detection/detector.h"
+#include "fisheye_mapping/core/camera/rig.h"
+#include "fisheye_mapping/core/sim/synthetic_world.h"
 
 namespace fm = fisheye_mapping;
 namespace cli = fm::cli;

@@ -30,8 +30,8 @@
 
 #include "cli.h"
 #include "fisheye_mapping/Detection2DArray.h"
-#include "fisheye_mapping/core/rig.h"
-#include "fisheye_mapping/core/synthetic_world.h"
+#include "fisheye_mapping/core/camera/rig.h"
+#include "fisheye_mapping/core/sim/synthetic_world.h"
 
 namespace fm = fisheye_mapping;
 

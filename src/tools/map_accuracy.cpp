@@ -30,7 +30,7 @@
 #include <vector>
 
 #include "cli.h"
-#include "fisheye_mapping/core/mesh_distance.h"
+#include "fisheye_mapping/core/eval/mesh_distance.h"
 
 namespace fm = fisheye_mapping;
 namespace cli = fm::cli;

@@ -14,8 +14,8 @@
 #include <string>
 #include <vector>
 
-#include "fisheye_mapping/core/tsdf_map.h"
-#include "fisheye_mapping/core/tsdf_mesher.h"
+#include "fisheye_mapping/core/tsdf/tsdf_map.h"
+#include "fisheye_mapping/core/tsdf/tsdf_mesher.h"
 
 namespace fm = fisheye_mapping;
 

@@ -46,14 +46,14 @@
 
 #include "cli.h"
 #include "fisheye_mapping/Detection2DArray.h"
-#include "fisheye_mapping/core/depth_mask.h"
-#include "fisheye_mapping/core/detector.h"
-#include "fisheye_mapping/core/frame_sync.h"
-#include "fisheye_mapping/core/params.h"
-#include "fisheye_mapping/core/plane_sweep.h"
-#include "fisheye_mapping/core/rig.h"
-#include "fisheye_mapping/core/tsdf_map.h"
-#include "fisheye_mapping/core/tsdf_mesher.h"
+#include "fisheye_mapping/core/detection/depth_mask.h"
+#include "fisheye_mapping/core/detection/detector.h"
+#include "fisheye_mapping/core/sync/frame_sync.h"
+#include "fisheye_mapping/core/common/params.h"
+#include "fisheye_mapping/core/depth/plane_sweep.h"
+#include "fisheye_mapping/core/camera/rig.h"
+#include "fisheye_mapping/core/tsdf/tsdf_map.h"
+#include "fisheye_mapping/core/tsdf/tsdf_mesher.h"
 
 namespace fm = fisheye_mapping;
 namespace cli = fm::cli;

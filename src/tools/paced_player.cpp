@@ -51,8 +51,8 @@
 
 #include "cli.h"
 #include "fisheye_mapping/FrameDone.h"
-#include "fisheye_mapping/core/frame_pacer.h"
-#include "fisheye_mapping/core/rig.h"
+#include "fisheye_mapping/core/sync/frame_pacer.h"
+#include "fisheye_mapping/core/camera/rig.h"
 
 namespace fm = fisheye_mapping;
 

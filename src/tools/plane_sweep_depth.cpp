@@ -27,10 +27,10 @@
 #include <sensor_msgs/Image.h>
 #include <yaml-cpp/yaml.h>
 
-#include "fisheye_mapping/core/depth_image.h"
-#include "fisheye_mapping/core/params.h"
-#include "fisheye_mapping/core/plane_sweep.h"
-#include "fisheye_mapping/core/rig.h"
+#include "fisheye_mapping/core/depth/depth_image.h"
+#include "fisheye_mapping/core/common/params.h"
+#include "fisheye_mapping/core/depth/plane_sweep.h"
+#include "fisheye_mapping/core/camera/rig.h"
 
 namespace fm = fisheye_mapping;
 

@@ -26,9 +26,9 @@
 
 #include <opencv2/imgcodecs.hpp>
 
-#include "fisheye_mapping/core/frame_sync.h"
-#include "fisheye_mapping/core/rig.h"
-#include "fisheye_mapping/core/rig_refinement.h"
+#include "fisheye_mapping/core/sync/frame_sync.h"
+#include "fisheye_mapping/core/camera/rig.h"
+#include "fisheye_mapping/core/camera/rig_refinement.h"
 
 namespace fm = fisheye_mapping;
 

@@ -14,8 +14,8 @@
 #include <vector>
 
 #include "cli.h"
-#include "fisheye_mapping/core/rig.h"
-#include "fisheye_mapping/core/rig_geometry.h"
+#include "fisheye_mapping/core/camera/rig.h"
+#include "fisheye_mapping/core/camera/rig_geometry.h"
 
 namespace fm = fisheye_mapping;
 

@@ -26,8 +26,8 @@
 #include <vector>
 
 #include "cli.h"
-#include "fisheye_mapping/core/analytic_scene.h"
-#include "fisheye_mapping/core/tsdf_map.h"
+#include "fisheye_mapping/core/sim/analytic_scene.h"
+#include "fisheye_mapping/core/tsdf/tsdf_map.h"
 
 namespace fm = fisheye_mapping;
 using fm::analytic::Scene;

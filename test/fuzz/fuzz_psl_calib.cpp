@@ -6,7 +6,7 @@
 #include <cstdlib>
 #include <string>
 
-#include "fisheye_mapping/core/rig.h"
+#include "fisheye_mapping/core/camera/rig.h"
 
 namespace fm = fisheye_mapping;
 

@@ -11,7 +11,7 @@
 #include <set>
 #include <string>
 
-#include "fisheye_mapping/core/rig.h"
+#include "fisheye_mapping/core/camera/rig.h"
 
 namespace fm = fisheye_mapping;
 

@@ -1,7 +1,7 @@
 // libFuzzer target: the TSDF map file loader (TsdfMap::load, public API only).
 // Each input is written to a file and loaded twice: as it is (header and
 // record CRCs must catch corruption), and, for a version-2 file, with its CRCs
-// recomputed from the layout documented in src/core/tsdf_io.cpp, so that the
+// recomputed from the layout documented in src/core/tsdf/tsdf_io.cpp, so that the
 // checks behind the CRCs (block count against the file size, finite voxels,
 // |tsdf| <= 1, weights, block indices, duplicates) are reached too.
 // Allowed outcomes: std::runtime_error naming the file (map unchanged), or a
@@ -23,7 +23,7 @@
 #include <string>
 #include <vector>
 
-#include "fisheye_mapping/core/tsdf_map.h"
+#include "fisheye_mapping/core/tsdf/tsdf_map.h"
 
 namespace fm = fisheye_mapping;
 

@@ -6,9 +6,9 @@
 
 #include <ros/node_handle.h>
 
-#include "fisheye_mapping/core/params.h"
-#include "fisheye_mapping/core/plane_sweep.h"
-#include "fisheye_mapping/core/rig.h"
+#include "fisheye_mapping/core/common/params.h"
+#include "fisheye_mapping/core/depth/plane_sweep.h"
+#include "fisheye_mapping/core/camera/rig.h"
 
 namespace fisheye_mapping {
 

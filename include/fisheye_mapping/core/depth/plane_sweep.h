@@ -1,0 +1,249 @@
+// Plane-sweep stereo on raw fisheye images (Cui et al. 2019, Sec. III-A;
+// Häne et al. 2014): a reference view and any number of supporting views with
+// known poses, each with its own camera model, no rectification.
+//
+// Two plane families in the reference camera's frame: `fronto_planes` planes
+// parallel to its image plane, uniform in inverse depth over [near, far] (z),
+// and `ground_planes` planes parallel to the ground (z = 0 in the base frame,
+// from the mount), at heights [ground_min, ground_max]. Cost: (1 - ZNCC) / 2
+// over a window (9x9 at full resolution, 7x7 at half), aggregated over the
+// supporting views (mean, or mean of the best k); winner takes all with
+// parabolic sub-plane refinement.
+//
+// Multi-scale: the half-resolution sweep over the whole view, upsampled, with a
+// full-resolution sweep of a centre crop on top wherever the crop has a depth.
+//
+// Filters (each switchable): too little texture in the reference window for
+// the image's noise (sky, blank walls), best cost above alpha (separate alpha
+// for the upper and lower part of the image), best / second-best cost ratio
+// above max_ratio, and local consistency (fewer than delta of the window's
+// other pixels within gamma metres of the pixel's depth).
+//
+// Output depth: CV_32FC1, metres of Euclidean range along the pixel's ray,
+// NaN where invalid; never outside [near, far] (range, like the output).
+//
+// Three backends share the warping, scoring and selection code
+// (plane_sweep_shared.h): "opencl" (any OpenCL 1.2 device: the GPU path),
+// "native" (C++ with OpenMP threads and SIMD loops, baseline x86-64 or
+// AVX2 + FMA chosen at run time: the CPU path) and "cpu" (a plain C++
+// reference in double precision, slow, for tests on small images). "auto"
+// (the default) takes "opencl" when the machine has an OpenCL GPU, else
+// "native".
+#ifndef FISHEYE_MAPPING_CORE_DEPTH_PLANE_SWEEP_H_
+#define FISHEYE_MAPPING_CORE_DEPTH_PLANE_SWEEP_H_
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <Eigen/Geometry>
+#include <opencv2/core.hpp>
+
+#include "fisheye_mapping/core/camera/camera_model.h"
+#include "fisheye_mapping/core/depth/plane_sweep_shared.h"
+#include "fisheye_mapping/core/camera/rig.h"
+
+namespace fisheye_mapping {
+
+struct DepthFilterConfig {
+  // Texture: drop pixels with too little texture to correlate: the matching
+  // window's standard deviation is below min_texture_snr times the image's
+  // sensor noise (estimated per frame and scale from the image itself, at
+  // least min_noise_std), or the pixel lies in a textureless region (sky,
+  // blank walls: see texturelessRegions), where windows reaching across the
+  // region's edge would match the edge.
+  bool texture = true;
+  double min_texture_snr = 1.5;
+  double min_noise_std = 1.0 / 255.0;  // image values in [0, 1]: one 8-bit step
+  bool cost = true;              // drop best cost > alpha
+  double alpha_upper = 0.05;     // rows above split_row * height
+  double alpha_lower = 0.3;      // rows below
+  double split_row = 0.5;        // fraction of the image height
+  bool uniqueness = true;        // drop best / second-best cost > max_ratio
+  double max_ratio = 0.9;
+  bool consistency = true;       // drop when < delta of the window is within gamma
+  int consistency_window = 5;    // odd
+  double gamma = 0.5;            // metres
+  double delta = 0.3;
+  // Throws std::invalid_argument naming the field.
+  void validate() const;
+};
+
+struct PlaneSweepConfig {
+  // Planes.
+  int fronto_planes = 64;
+  // Depth range, metres of range along the ray (the output's unit): output
+  // outside [near, far] is dropped. The fronto-parallel planes span z-depths
+  // near to far, so every one meets every ray within or beyond the range.
+  double near = 1.5;
+  double far = 60.0;
+  int ground_planes = 30;        // 0 disables the family
+  double ground_min = -0.3;      // plane heights above the base frame's ground, metres
+  double ground_max = 0.3;
+  // Matching.
+  int window_full = 9;           // odd window sizes
+  int window_half = 7;
+  std::string aggregation = "average";  // "average" | "best_k"
+  int best_k = 2;
+  bool subpixel = true;
+  // Scales: "full" | "half" | "multiscale".
+  std::string resolution = "multiscale";
+  double crop_width = 572.0 / 1024.0;   // centre crop, fractions of the full image
+  double crop_height = 332.0 / 544.0;
+  // Supporting views: kept when the parallax between the near and far planes
+  // (median over the reference's pixels, full resolution, in pixels of the
+  // coarser of the two images: a narrow camera's long focal length does not
+  // count) is at least min_parallax_px pixels per fronto-parallel plane (a
+  // baseline too short for the matching to resolve the planes adds noise and
+  // its calibration error, not depth) and at least min_parallax_ratio of the
+  // largest parallax among the views (mean aggregation weighs every view
+  // alike, while a view's cost curve sharpens with the square of its
+  // parallax: one with a third of the best's adds a ninth of the best's
+  // discrimination but all of its own noise and bias), and at least
+  // min_overlap of the reference's pixels (at the geometric mean of near and
+  // far) are seen by the view.
+  double min_parallax_px = 0.25;
+  double min_parallax_ratio = 0.33;
+  double min_overlap = 0.2;
+  DepthFilterConfig filters;
+  // Backend.
+  std::string backend = "auto";    // "auto" | "native" | "opencl" | "cpu"
+  std::string device;              // OpenCL device (see OpenClContext); "auto" with a
+                                   // device set takes "opencl"
+  int band_rows = 32;              // rows per work item of the cost kernel (opencl)
+                                   // or per band of a thread (native)
+  // Throws std::invalid_argument naming the field.
+  void validate() const;
+};
+
+// One image to match, with its camera and pose relative to the reference.
+struct SweepView {
+  std::string name;              // for messages ("cam2")
+  CameraModel camera;
+  Eigen::Isometry3d T_ref_view = Eigen::Isometry3d::Identity();
+  cv::Mat image;  // CV_8UC1, CV_8UC3 (BGR), CV_16UC1 or CV_32FC1 in [0, 1]
+  cv::Mat mask;   // optional CV_8UC1 self-mask: non-zero = car body, not matched
+};
+
+struct DepthResult {
+  cv::Mat depth;       // filtered range (CV_32FC1, NaN invalid), reference size
+  cv::Mat raw_depth;   // the same before filtering
+  cv::Mat cost;        // best cost, NaN where no plane had one
+  cv::Mat uniqueness;  // best / second-best cost, NaN where none
+  cv::Mat texture;     // reference window std / sensor noise std, NaN where none
+  std::vector<std::string> used_views;     // supporting views matched
+  std::vector<std::string> dropped_views;  // "<name>: reason"
+  std::vector<std::string> warnings;       // "<name>: ..." (e.g. non-finite pixels of float images, masked)
+  double sweep_ms = 0.0;   // all scales, including transfers
+  double filter_ms = 0.0;
+  double total_ms = 0.0;
+};
+
+// The planes of a sweep. Without T_base_ref (reference camera -> base frame)
+// there is no ground and only fronto-parallel planes are made.
+std::vector<FmSweepPlane> makeSweepPlanes(const PlaneSweepConfig& config, const Eigen::Isometry3d* T_base_ref);
+
+// Grey float image in [0, 1]; throws std::invalid_argument naming `what` for
+// unsupported types.
+cv::Mat toSweepImage(const cv::Mat& image, const std::string& what);
+
+// Applies the enabled filters to raw range (NaN invalid) given the best cost,
+// ratio and texture images (texture may be empty: no texture filter); returns
+// the filtered range.
+cv::Mat applyDepthFilters(const DepthFilterConfig& config, const cv::Mat& raw, const cv::Mat& cost,
+                          const cv::Mat& ratio, const cv::Mat& texture = cv::Mat());
+
+// Standard deviation of an image's sensor noise (image units), robust to
+// texture: the median absolute response of Immerkaer's noise operator (the
+// difference of two Laplacians, which cancels smooth intensity) over the
+// pixels whose 3x3 neighbourhood is valid (non-zero in `valid`, CV_8UC1, or
+// every pixel when empty). Returns 0 when there are no such pixels.
+double estimateNoiseStd(const cv::Mat& image, const cv::Mat& valid = cv::Mat());
+
+// Textureless regions of a grey float image (the sky, blank walls):
+// connected (4-neighbour) areas of valid pixels whose 3x3 standard deviation
+// is below min_snr times the image's noise (estimateNoiseStd, at least
+// min_noise_std) and three quarters of whose `window` x `window` windows are below it
+// too (a road can be flat at 3x3 while its texture shows at the matching
+// window's scale), each at least 0.2 % of the valid pixels, grown by 2
+// pixels. CV_8UC1, 255 inside.
+cv::Mat texturelessRegions(const cv::Mat& image, const cv::Mat& valid, double min_snr, double min_noise_std,
+                           int window);
+
+// Which supporting views are worth matching (see PlaneSweepConfig). Returns
+// their indices; *reasons gets "<name>: why" for the dropped ones.
+std::vector<int> selectSupportViews(const PlaneSweepConfig& config, const CameraModel& ref,
+                                    const std::vector<SweepView>& views, std::vector<std::string>* reasons);
+
+// What a backend gets for one scale.
+struct SweepLevel {
+  int id = 0;                       // scale slot (0 full, 1 half, 2 crop)
+  unsigned rays_version = 0;        // changes whenever `rays` changes
+  const std::vector<float>* rays = nullptr;  // 3 per pixel; zero = masked / invalid
+  int width = 0, height = 0;
+  cv::Mat ref, ref_mean, ref_std;   // CV_32FC1: image and window statistics
+  int radius = 4;
+  std::vector<FmCameraT<float>> cameras;  // supporting views
+  std::vector<FmViewPose> poses;          // T_view_ref
+  std::vector<cv::Mat> images;            // CV_32FC1, -1 where self-masked
+};
+
+class SweepBackend {
+ public:
+  virtual ~SweepBackend() = default;
+  virtual std::string name() const = 0;
+  // Range (NaN invalid), best cost and ratio at the level's resolution.
+  virtual void sweep(const SweepLevel& level, const std::vector<FmSweepPlane>& planes,
+                     const PlaneSweepConfig& config, cv::Mat* range, cv::Mat* cost, cv::Mat* ratio) = 0;
+};
+std::unique_ptr<SweepBackend> makeCpuSweepBackend();
+std::unique_ptr<SweepBackend> makeNativeSweepBackend();
+std::unique_ptr<SweepBackend> makeOpenClSweepBackend(const std::string& device);
+
+// Not thread-safe (one per thread); keeps the per-scale ray tables and the
+// backend's buffers from frame to frame.
+class PlaneSweep {
+ public:
+  // Throws std::invalid_argument for a bad config, OpenClError when the
+  // OpenCL device is missing or the kernels do not build.
+  explicit PlaneSweep(const PlaneSweepConfig& config);
+  ~PlaneSweep();
+
+  const PlaneSweepConfig& config() const { return config_; }
+  std::string backendName() const;
+  // Filter thresholds can change between frames (dynamic_reconfigure).
+  void setFilters(const DepthFilterConfig& filters);
+
+  // ref.T_ref_view is ignored (identity). T_base_ref (reference camera ->
+  // base frame) places the ground planes; nullptr sweeps fronto-parallel
+  // planes only. Throws std::invalid_argument naming the view for images that
+  // do not match their camera, masks of the wrong size or type, float images
+  // with no finite pixel, or more than FM_SWEEP_MAX_VIEWS supporting views.
+  // NaN / infinite pixels of float images are masked (result.warnings says
+  // how many).
+  DepthResult compute(const SweepView& ref, const std::vector<SweepView>& supports,
+                      const Eigen::Isometry3d* T_base_ref);
+
+ private:
+  struct Scale;
+  const std::vector<float>& raysFor(int slot, const CameraModel& camera, const cv::Mat& mask, unsigned* version);
+
+  PlaneSweepConfig config_;
+  std::unique_ptr<SweepBackend> backend_;
+  struct RayCache {
+    FmCameraT<float> camera{};
+    cv::Mat mask;
+    std::vector<float> rays;
+    cv::Mat valid;  // CV_8UC1, 255 where `rays` has a ray (not masked, in the image)
+    unsigned version = 0;
+  };
+  RayCache rays_[3];
+};
+
+// The rig's cameras as sweep views relative to camera `ref_index`.
+SweepView rigSweepView(const Rig& rig, int index, int ref_index, const cv::Mat& image,
+                       const cv::Mat& mask = cv::Mat());
+
+}  // namespace fisheye_mapping
+
+#endif  // FISHEYE_MAPPING_CORE_DEPTH_PLANE_SWEEP_H_

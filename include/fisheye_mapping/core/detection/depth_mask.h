@@ -1,0 +1,113 @@
+// Removing potentially moving objects from depth maps (paper Sec. III-B), and
+// pairing depth maps with the detections of the same image by stamp. No ROS.
+#ifndef FISHEYE_MAPPING_CORE_DETECTION_DEPTH_MASK_H_
+#define FISHEYE_MAPPING_CORE_DETECTION_DEPTH_MASK_H_
+
+#include "fisheye_mapping/core/detection/detector.h"
+
+#include <opencv2/core.hpp>
+
+#include <cstdint>
+#include <deque>
+#include <map>
+#include <optional>
+#include <vector>
+
+namespace fisheye_mapping {
+
+/// Sets depth to NaN inside every box grown by `margin_px` on each side, and returns
+/// the mask (CV_8U, 255 where invalidated by a box). A pixel is inside when its centre
+/// is. Boxes refer to an image of `image_w` x `image_h` pixels; they are scaled to the
+/// depth map's size when it differs (e.g. half-resolution depth).
+/// Throws std::invalid_argument when depth is not CV_32FC1 or the image size is not positive.
+cv::Mat maskDepthBoxes(cv::Mat& depth, const std::vector<Detection>& boxes, float margin_px, int image_w,
+                       int image_h);
+
+/// Pairs depth maps with detections by exact stamp (nanoseconds). Detections may come
+/// before or after their depth; a depth map waits at most `wait_s` for its detections,
+/// then is released without them (timed_out). `now_s` is any monotonic clock in seconds.
+template <class Depth, class Dets>
+class StampPairer {
+ public:
+  struct Pair {
+    std::uint64_t stamp;
+    Depth depth;
+    std::optional<Dets> dets;  ///< empty when released after the wait
+  };
+  explicit StampPairer(double wait_s, std::size_t max_pending = 64) : wait_s_(wait_s), max_pending_(max_pending) {}
+
+  void setWait(double wait_s) { wait_s_ = wait_s; }
+
+  std::vector<Pair> addDepth(std::uint64_t stamp, Depth depth, double now_s) {
+    std::vector<Pair> out;
+    auto it = dets_.find(stamp);
+    if (it != dets_.end()) {
+      out.push_back({stamp, std::move(depth), std::move(it->second)});
+      dets_.erase(it);
+    } else {
+      depth_.push_back({stamp, now_s, std::move(depth)});
+      while (depth_.size() > max_pending_) {  // never hold more than max_pending maps
+        out.push_back({depth_.front().stamp, std::move(depth_.front().depth), std::nullopt});
+        depth_.pop_front();
+        ++timed_out_;
+      }
+    }
+    auto rest = poll(now_s);
+    out.insert(out.end(), std::make_move_iterator(rest.begin()), std::make_move_iterator(rest.end()));
+    return out;
+  }
+
+  std::vector<Pair> addDetections(std::uint64_t stamp, Dets dets, double now_s) {
+    std::vector<Pair> out;
+    for (auto it = depth_.begin(); it != depth_.end(); ++it) {
+      if (it->stamp != stamp) continue;
+      out.push_back({stamp, std::move(it->depth), std::move(dets)});
+      depth_.erase(it);
+      auto rest = poll(now_s);
+      out.insert(out.end(), std::make_move_iterator(rest.begin()), std::make_move_iterator(rest.end()));
+      return out;
+    }
+    if (released_.count(stamp)) {
+      ++late_;  // its depth already went out without it
+    } else {
+      dets_[stamp] = std::move(dets);
+      while (dets_.size() > max_pending_) dets_.erase(dets_.begin());  // oldest stamp first
+    }
+    return poll(now_s);
+  }
+
+  /// Releases depth maps that waited longer than the wait.
+  std::vector<Pair> poll(double now_s) {
+    std::vector<Pair> out;
+    while (!depth_.empty() && now_s - depth_.front().arrival >= wait_s_) {
+      released_[depth_.front().stamp] = true;
+      if (released_.size() > 4 * max_pending_) released_.erase(released_.begin());
+      out.push_back({depth_.front().stamp, std::move(depth_.front().depth), std::nullopt});
+      depth_.pop_front();
+      ++timed_out_;
+    }
+    return out;
+  }
+
+  std::size_t pendingDepth() const { return depth_.size(); }
+  std::size_t pendingDetections() const { return dets_.size(); }
+  std::uint64_t timedOut() const { return timed_out_; }  ///< depth maps released without detections
+  std::uint64_t late() const { return late_; }           ///< detections that came after their depth left
+
+ private:
+  struct Waiting {
+    std::uint64_t stamp;
+    double arrival;
+    Depth depth;
+  };
+  double wait_s_;
+  std::size_t max_pending_;
+  std::deque<Waiting> depth_;
+  std::map<std::uint64_t, Dets> dets_;
+  std::map<std::uint64_t, bool> released_;
+  std::uint64_t timed_out_ = 0, late_ = 0;
+};
+
+}  // namespace fisheye_mapping
+
+#endif  // FISHEYE_MAPPING_CORE_DETECTION_DEPTH_MASK_H_

@@ -1,0 +1,146 @@
+// YOLO-family object detection through OpenCV's DNN module (no ROS).
+//
+// A model YAML (config/detector/*.yaml) names the file format (Darknet cfg +
+// weights, or ONNX), the network input size, the class names, the output head
+// (darknet, yolov5, yolov8, nanodet), the score and NMS thresholds, the input
+// normalisation and which classes count as potentially moving. Images (mono8
+// fisheye frames are replicated to three channels) are letterboxed into the
+// network input, the outputs decoded by the head's decoder, suppressed per
+// class, and the boxes mapped back to image pixels.
+#ifndef FISHEYE_MAPPING_CORE_DETECTION_DETECTOR_H_
+#define FISHEYE_MAPPING_CORE_DETECTION_DETECTOR_H_
+
+#include <opencv2/core.hpp>
+
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace fisheye_mapping {
+
+/// One detection in image pixels (x right, y down, origin at the top-left pixel's corner).
+struct Detection {
+  int class_id = -1;
+  std::string class_name;
+  float score = 0.f;
+  float x_min = 0.f, y_min = 0.f, x_max = 0.f, y_max = 0.f;
+};
+
+enum class ModelFormat { Darknet, Onnx };
+/// darknet: cv::dnn's [yolo]/[region] output rows (cx, cy, w, h normalised to the input,
+///          objectness, class scores already multiplied by the objectness).
+/// yolov5:  one output [1, N, 5 + C]: cx, cy, w, h in input pixels, objectness, class scores.
+/// yolov8:  one output [1, 4 + C, N] (or [1, N, 4 + C]): cx, cy, w, h in input pixels, class scores.
+/// nanodet: GFL head: per stride class scores [1, N_s, C] and distance bins
+///          [1, N_s, 4 * (reg_max + 1)], or both concatenated in one [1, sum N_s, C + 4 * (reg_max + 1)].
+enum class DetectorHead { Darknet, YoloV5, YoloV8, NanoDet };
+
+struct DetectorConfig {
+  ModelFormat format = ModelFormat::Onnx;
+  std::string model_path;    ///< .onnx, or the Darknet .weights
+  std::string darknet_cfg;   ///< Darknet .cfg (format darknet only)
+  int input_width = 416;
+  int input_height = 416;
+  std::vector<std::string> class_names;
+  DetectorHead head = DetectorHead::NanoDet;
+  float score_threshold = 0.35f;
+  float nms_threshold = 0.5f;
+  /// Classes whose boxes are published (and masked): the potentially moving ones.
+  std::vector<std::string> moving_classes = {"bicycle", "car", "motorbike", "bus", "train", "truck"};
+  /// Input normalisation, in the network's channel order: (pixel - mean) / std, pixel in 0..255.
+  cv::Scalar mean = cv::Scalar(0, 0, 0);
+  cv::Scalar std = cv::Scalar(255, 255, 255);
+  bool swap_rb = true;          ///< network wants RGB (input images are BGR or grey)
+  bool letterbox = true;        ///< keep the aspect ratio, pad; false: stretch to the input size
+  float pad_value = 114.f;      ///< letterbox border grey level
+  // nanodet head
+  std::vector<int> strides = {8, 16, 32};
+  int reg_max = 10;             ///< distance bins per side minus one
+  float center_offset = 0.5f;   ///< anchor centre (i + offset) * stride (0.5: NanoDet GFL; 0: NanoDet-Plus)
+};
+
+/// Reads a model YAML. Relative paths are relative to the YAML's folder; `~`,
+/// `${VAR}` and `${VAR:-default}` are expanded. Throws std::runtime_error naming
+/// the file and the key for anything missing or malformed.
+DetectorConfig loadDetectorConfig(const std::string& yaml_path);
+
+/// Expands a leading `~`, `${VAR}` and `${VAR:-default}` (nested defaults allowed).
+std::string expandPath(const std::string& path);
+
+const char* headName(DetectorHead head);
+DetectorHead parseHead(const std::string& name);  ///< throws on unknown names
+
+/// The image -> network input mapping of a letterbox (or stretch).
+struct Letterbox {
+  float scale_x = 1.f, scale_y = 1.f;  ///< input pixels per image pixel
+  float pad_x = 0.f, pad_y = 0.f;      ///< input pixels left / top of the image
+  static Letterbox compute(int image_w, int image_h, int input_w, int input_h, bool keep_aspect);
+  float toImageX(float x) const { return (x - pad_x) / scale_x; }
+  float toImageY(float y) const { return (y - pad_y) / scale_y; }
+};
+
+/// Converts mono8 / bgr8 / bgra8 to the normalised NCHW float blob the network takes.
+/// Throws std::invalid_argument for an empty image or an unsupported type.
+cv::Mat makeInputBlob(const cv::Mat& image, const DetectorConfig& cfg, Letterbox* lb);
+
+/// A candidate before suppression: box in network-input pixels.
+struct Candidate {
+  int class_id;
+  float score;
+  float x_min, y_min, x_max, y_max;
+};
+
+/// Head decoders: network outputs -> candidates above cfg.score_threshold (best class per anchor).
+/// They throw std::runtime_error when the outputs do not have the head's layout.
+std::vector<Candidate> decodeDarknet(const std::vector<cv::Mat>& outs, const DetectorConfig& cfg);
+std::vector<Candidate> decodeYoloV5(const std::vector<cv::Mat>& outs, const DetectorConfig& cfg);
+std::vector<Candidate> decodeYoloV8(const std::vector<cv::Mat>& outs, const DetectorConfig& cfg);
+std::vector<Candidate> decodeNanoDet(const std::vector<cv::Mat>& outs, const DetectorConfig& cfg);
+std::vector<Candidate> decodeHead(const std::vector<cv::Mat>& outs, const DetectorConfig& cfg);
+
+/// Non-maximum suppression within each class (different classes never suppress each other).
+std::vector<Candidate> nmsPerClass(const std::vector<Candidate>& cands, float iou_threshold);
+
+/// Intersection over union of two boxes.
+float boxIoU(const Detection& a, const Detection& b);
+
+/// Candidates (input pixels) -> detections in image pixels, clipped to the image; keeps only
+/// moving classes when `only_moving` (class names from cfg).
+std::vector<Detection> toDetections(const std::vector<Candidate>& cands, const Letterbox& lb,
+                                    const DetectorConfig& cfg, int image_w, int image_h,
+                                    bool only_moving);
+
+/// Draws boxes with class name and score on a BGR copy of `image`.
+cv::Mat annotateDetections(const cv::Mat& image, const std::vector<Detection>& dets);
+
+/// cv::dnn backend / target by name: backend "opencv" | "default"; target "cpu" | "opencl" | "opencl_fp16".
+struct DnnDevice {
+  std::string backend = "opencv";
+  std::string target = "cpu";
+};
+
+class Detector {
+ public:
+  /// Loads the network; throws std::runtime_error with the path and OpenCV's reason when the
+  /// model file is missing or cannot be parsed.
+  Detector(const DetectorConfig& cfg, const DnnDevice& device = DnnDevice());
+  ~Detector();
+  Detector(const Detector&) = delete;
+  Detector& operator=(const Detector&) = delete;
+
+  /// Detections in image pixels. `only_moving`: keep the config's moving classes only.
+  std::vector<Detection> detect(const cv::Mat& image, bool only_moving = true);
+  /// Raw network outputs of the last detect() (for tests and tools).
+  const std::vector<cv::Mat>& lastOutputs() const { return outs_; }
+  const DetectorConfig& config() const { return cfg_; }
+
+ private:
+  DetectorConfig cfg_;
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+  std::vector<cv::Mat> outs_;
+};
+
+}  // namespace fisheye_mapping
+
+#endif  // FISHEYE_MAPPING_CORE_DETECTION_DETECTOR_H_

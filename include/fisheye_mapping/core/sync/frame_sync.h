@@ -1,0 +1,309 @@
+// Grouping the images of N cameras into synchronized frame sets (no ROS), and
+// noticing when time goes backwards (StreamTimeline).
+//
+// message_filters' Synchronizer takes at most 9 inputs; this groups any number
+// of cameras. Policies:
+//   exact        images belong together when their stamps are equal;
+//   approximate  an image joins the oldest open set that lacks its camera and
+//                whose first stamp is within max_interval of its own.
+// A set is published when every camera has an image. Open sets older than a
+// completed one, and the oldest open sets beyond the queue size, can no longer
+// complete (each camera's stamps increase) and are dropped and counted. An
+// image older than the last published set is dropped as out of order.
+//
+// Time going backwards (a bag played again, `rosbag play` restarted, a
+// simulator's clock reset): a camera's stamp older than that camera's newest
+// by more than the time-reset threshold (default 1 s) starts a new timeline:
+// the sync forgets its open sets and the last published stamp, counts a time
+// reset and keeps its reason (lastTimeReset()), and goes on grouping. Smaller
+// steps back (jitter, a late image) are dropped as out of order as before.
+// Images of the other cameras that still belong to the old timeline (stamps
+// ahead of the new one by more than the threshold: in flight when the reset
+// happened) are dropped as stale until that camera's stamps join the new
+// timeline. A clock that jumps backwards under the stream (clockAt(): the ROS
+// clock under sim time) resets the same way.
+#ifndef FISHEYE_MAPPING_CORE_SYNC_FRAME_SYNC_H_
+#define FISHEYE_MAPPING_CORE_SYNC_FRAME_SYNC_H_
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <deque>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace fisheye_mapping {
+
+enum class SyncPolicy { Exact, Approximate };
+
+inline SyncPolicy parseSyncPolicy(const std::string& s) {
+  if (s == "exact") return SyncPolicy::Exact;
+  if (s == "approximate") return SyncPolicy::Approximate;
+  throw std::invalid_argument("sync policy '" + s + "' is neither exact nor approximate");
+}
+
+/// A stamp in seconds with millisecond digits, for messages ("1234.567").
+inline std::string formatStamp(std::int64_t ns) {
+  char buf[48];
+  std::snprintf(buf, sizeof buf, "%.3f", double(ns) * 1e-9);
+  return buf;
+}
+
+/// Time going backwards on a set of streams that share one timeline (the
+/// cameras of a rig; depth maps and detections of the same images).
+///
+/// Each stream's stamps normally increase. A stamp older than its stream's
+/// newest by more than `threshold_s` resets the timeline (observe() returns
+/// kReset with the old and new stamps and a reason): the caller clears every
+/// state keyed on time. After a reset, the other streams are on the old
+/// timeline until they show a stamp not ahead of the new timeline's newest by
+/// more than the threshold (kJoined, then kOk); their stamps before that are
+/// stragglers of the old timeline (kStale: drop them). A stream that stays
+/// ahead for more than 3 thresholds of its own time is not straggling: it
+/// joins. clock() resets when the newest stamp is ahead of a clock that jumped
+/// back. A threshold <= 0 (or not finite) disables resets: every stamp is kOk.
+/// Not thread-safe.
+class StreamTimeline {
+ public:
+  enum class Kind { kOk, kReset, kJoined, kStale };
+  struct Event {
+    Kind kind = Kind::kOk;
+    std::int64_t from_ns = 0;  ///< kReset: the newest stamp before (the stream's, or the clock check's newest)
+    std::int64_t to_ns = 0;    ///< kReset: the stamp (or clock) that went back
+    std::string reason;        ///< kReset: what happened, for logs and diagnostics
+  };
+
+  StreamTimeline(int streams, double threshold_s) : streams_(std::max(0, streams)) {
+    if (streams < 1) throw std::invalid_argument("stream timeline: need at least one stream");
+    if (std::isfinite(threshold_s) && threshold_s > 0) threshold_ns_ = std::int64_t(threshold_s * 1e9);
+  }
+
+  bool enabled() const { return threshold_ns_ > 0; }
+  double thresholdSeconds() const { return threshold_ns_ * 1e-9; }
+
+  Event observe(int stream, std::int64_t stamp_ns) {
+    if (stream < 0 || stream >= int(streams_.size())) throw std::out_of_range("stream timeline: stream index out of range");
+    Event e;
+    if (!enabled()) return e;
+    Stream& s = streams_[stream];
+    if (s.epoch != epoch_) {
+      // On the old timeline until its stamps come near the new one.
+      if (newest_ && stamp_ns > *newest_ + threshold_ns_) {
+        if (!s.stale_first) s.stale_first = stamp_ns;
+        if (stamp_ns - *s.stale_first <= 3 * threshold_ns_) {
+          ++stale_;
+          e.kind = Kind::kStale;
+          s.newest = s.newest ? std::max(*s.newest, stamp_ns) : stamp_ns;
+          return e;
+        }
+      }
+      s.epoch = epoch_;
+      s.stale_first.reset();
+      s.newest = stamp_ns;
+      newest_ = newest_ ? std::max(*newest_, stamp_ns) : stamp_ns;
+      e.kind = Kind::kJoined;
+      return e;
+    }
+    if (s.newest && stamp_ns < *s.newest - threshold_ns_) {
+      e.kind = Kind::kReset;
+      e.from_ns = *s.newest;
+      e.to_ns = stamp_ns;
+      e.reason = "time went backwards: stamp " + formatStamp(stamp_ns) + " s is " +
+                 formatStamp(*s.newest - stamp_ns) + " s older than the newest " + formatStamp(*s.newest) +
+                 " s (threshold " + formatStamp(threshold_ns_) +
+                 " s; a bag played again, the player restarted or the clock reset?)";
+      startEpoch(stamp_ns);
+      s.epoch = epoch_;
+      s.newest = stamp_ns;
+      return e;
+    }
+    s.newest = s.newest ? std::max(*s.newest, stamp_ns) : stamp_ns;
+    newest_ = newest_ ? std::max(*newest_, stamp_ns) : stamp_ns;
+    return e;
+  }
+
+  /// The clock now (e.g. ROS time under sim time; never call it with a zero
+  /// "no clock yet"): a reset when the newest stamp is ahead of it by more
+  /// than the threshold (the clock jumped back under the streams).
+  std::optional<Event> clock(std::int64_t now_ns) {
+    if (!enabled() || !newest_ || *newest_ <= now_ns + threshold_ns_) return std::nullopt;
+    Event e;
+    e.kind = Kind::kReset;
+    e.from_ns = *newest_;
+    e.to_ns = now_ns;
+    e.reason = "clock jumped backwards: now " + formatStamp(now_ns) + " s, " + formatStamp(*newest_ - now_ns) +
+               " s before the newest stamp " + formatStamp(*newest_) + " s (threshold " +
+               formatStamp(threshold_ns_) + " s; a bag played again or the simulation restarted?)";
+    startEpoch(std::nullopt);  // the first stamp to come sets the new timeline
+    return e;
+  }
+
+  /// Forgets every stamp (as at construction; counts are kept).
+  void reset() {
+    for (auto& s : streams_) s = Stream{};
+    epoch_ = 0;
+    newest_.reset();
+  }
+
+  std::uint64_t resets() const { return resets_; }
+  std::uint64_t stale() const { return stale_; }  ///< stamps dropped as stragglers of an old timeline
+  std::optional<std::int64_t> newest() const { return newest_; }
+
+ private:
+  struct Stream {
+    std::uint64_t epoch = 0;
+    std::optional<std::int64_t> newest, stale_first;
+  };
+  void startEpoch(std::optional<std::int64_t> newest) {
+    ++epoch_;
+    ++resets_;
+    newest_ = newest;
+    for (auto& s : streams_) s.stale_first.reset();
+  }
+
+  std::vector<Stream> streams_;
+  std::int64_t threshold_ns_ = 0;
+  std::uint64_t epoch_ = 0, resets_ = 0, stale_ = 0;
+  std::optional<std::int64_t> newest_;  // newest stamp of the streams on the current timeline
+};
+
+template <class T>
+class FrameSetSync {
+ public:
+  struct Set {
+    std::int64_t stamp_ns;             ///< stamp of the first image that opened the set
+    std::vector<std::optional<T>> items;
+    int count = 0;
+  };
+  struct Stats {
+    std::uint64_t complete = 0, dropped_incomplete = 0, dropped_out_of_order = 0;
+    std::uint64_t time_resets = 0;    ///< timelines restarted (time went backwards)
+    std::uint64_t dropped_stale = 0;  ///< images of an old timeline after a reset
+  };
+  struct TimeReset {
+    std::int64_t from_ns = 0, to_ns = 0;  ///< newest stamp before, the stamp (or clock) after
+    std::string reason;                   ///< includes the open sets dropped
+  };
+
+  /// time_reset_s: a camera's stamp older than its newest by more than this
+  /// resets the sync (<= 0: never; such images are dropped as out of order).
+  FrameSetSync(int cameras, SyncPolicy policy, double max_interval_s, std::size_t queue_size,
+               double time_reset_s = 1.0)
+      : n_(cameras),
+        policy_(policy),
+        max_interval_ns_(std::int64_t(max_interval_s * 1e9)),
+        queue_(queue_size),
+        timeline_(std::max(1, cameras), time_reset_s) {
+    if (cameras < 1) throw std::invalid_argument("frame sync: need at least one camera");
+    if (queue_size < 1) throw std::invalid_argument("frame sync: queue size must be >= 1");
+    if (!(max_interval_s >= 0)) throw std::invalid_argument("frame sync: max_interval must be >= 0");
+  }
+
+  /// Adds camera `cam`'s image; returns the sets it completed (at most one), items in camera order.
+  std::vector<std::vector<T>> add(int cam, std::int64_t stamp_ns, T item) {
+    if (cam < 0 || cam >= n_) throw std::out_of_range("frame sync: camera index out of range");
+    std::vector<std::vector<T>> out;
+    const StreamTimeline::Event ev = timeline_.observe(cam, stamp_ns);
+    if (ev.kind == StreamTimeline::Kind::kStale) {
+      ++stats_.dropped_stale;
+      return out;
+    }
+    if (ev.kind == StreamTimeline::Kind::kReset) timeReset(ev, "camera " + std::to_string(cam) + ": ");
+    if (last_published_ && stamp_ns <= *last_published_ - (policy_ == SyncPolicy::Exact ? 0 : max_interval_ns_)) {
+      ++stats_.dropped_out_of_order;
+      return out;
+    }
+    Set* target = nullptr;
+    for (auto& s : open_) {
+      if (s.items[cam]) continue;
+      const std::int64_t d = std::llabs(stamp_ns - s.stamp_ns);
+      if ((policy_ == SyncPolicy::Exact && d == 0) || (policy_ == SyncPolicy::Approximate && d <= max_interval_ns_)) {
+        target = &s;
+        break;
+      }
+    }
+    if (!target) {
+      Set s;
+      s.stamp_ns = stamp_ns;
+      s.items.resize(n_);
+      // Keep the open sets ordered by stamp.
+      auto it = open_.begin();
+      while (it != open_.end() && it->stamp_ns <= stamp_ns) ++it;
+      target = &*open_.insert(it, std::move(s));
+    }
+    target->items[cam] = std::move(item);
+    ++target->count;
+    if (target->count == n_) {
+      const std::int64_t done = target->stamp_ns;
+      std::vector<T> items;
+      items.reserve(n_);
+      for (auto& i : target->items) items.push_back(std::move(*i));
+      out.push_back(std::move(items));
+      // Everything opened before the completed set can no longer complete.
+      while (!open_.empty() && open_.front().stamp_ns <= done) {
+        if (open_.front().stamp_ns != done) ++stats_.dropped_incomplete;
+        open_.pop_front();
+      }
+      last_published_ = done;
+      ++stats_.complete;
+    }
+    while (open_.size() > queue_) {
+      open_.pop_front();
+      ++stats_.dropped_incomplete;
+    }
+    return out;
+  }
+
+  /// The clock now (ROS time under sim time; not zero): resets when the newest
+  /// image is ahead of it by more than the threshold. Returns the reset.
+  std::optional<TimeReset> clockAt(std::int64_t now_ns) {
+    if (auto ev = timeline_.clock(now_ns)) {
+      timeReset(*ev, "");
+      return last_reset_;
+    }
+    return std::nullopt;
+  }
+
+  /// Forgets the open sets (counted as incomplete) and every stamp seen, as if
+  /// just constructed; the counts are kept.
+  void reset() {
+    stats_.dropped_incomplete += open_.size();
+    open_.clear();
+    last_published_.reset();
+    timeline_.reset();
+  }
+
+  const Stats& stats() const { return stats_; }
+  std::size_t open() const { return open_.size(); }
+  /// The latest time reset (empty before the first).
+  const std::optional<TimeReset>& lastTimeReset() const { return last_reset_; }
+
+ private:
+  void timeReset(const StreamTimeline::Event& ev, const std::string& who) {
+    const std::size_t dropped = open_.size();
+    stats_.dropped_incomplete += dropped;
+    open_.clear();
+    last_published_.reset();
+    ++stats_.time_resets;
+    last_reset_ = TimeReset{ev.from_ns, ev.to_ns,
+                            who + ev.reason + "; frame sync reset, " + std::to_string(dropped) + " open set(s) dropped"};
+  }
+
+  int n_;
+  SyncPolicy policy_;
+  std::int64_t max_interval_ns_;
+  std::size_t queue_;
+  std::deque<Set> open_;
+  std::optional<std::int64_t> last_published_;
+  StreamTimeline timeline_;
+  std::optional<TimeReset> last_reset_;
+  Stats stats_;
+};
+
+}  // namespace fisheye_mapping
+
+#endif  // FISHEYE_MAPPING_CORE_SYNC_FRAME_SYNC_H_

@@ -1,0 +1,78 @@
+/*
+ * TSDF voxel and its update, written once for C++ and OpenCL C (like
+ * camera_model_shared.h, whose macros it uses). Include camera_model_shared.h
+ * first.
+ *
+ * A voxel stores D, the truncated signed distance divided by the truncation
+ * mu (so D lies in [-1, 1], positive in front of the surface), and w, the
+ * number of observations fused so far, capped at a maximum.
+ */
+#ifndef FISHEYE_MAPPING_CORE_TSDF_TSDF_SHARED_H_
+#define FISHEYE_MAPPING_CORE_TSDF_TSDF_SHARED_H_
+
+#ifndef FM_OPENCL
+namespace fisheye_mapping {
+#endif
+
+#define FM_BLOCK_SIDE 8
+#define FM_BLOCK_VOXELS 512
+
+struct FmVoxel {
+  float tsdf;   /* D in [-1, 1] */
+  float weight; /* observations, capped at max_weight; 0 = never observed */
+};
+
+#ifdef FM_OPENCL
+typedef struct FmVoxel FmVoxel;
+#endif
+
+/* Fuses one observation: eta = measured range - the voxel's range along the
+ * same ray. Nothing happens behind the surface (eta < -mu). Otherwise
+ * D <- (w D + min(1, eta / mu)) / (w + 1) and w <- min(w + 1, max_weight).
+ * Returns 1 if the voxel changed. */
+FM_FN int fm_tsdf_update(FM_GLOBAL struct FmVoxel* v, float eta, float mu, float max_weight) {
+  if (!(eta >= -mu)) {
+    return 0;
+  }
+  float d = eta / mu;
+  if (d > 1.0f) {
+    d = 1.0f;
+  }
+  const float w = v->weight;
+  v->tsdf = (w * v->tsdf + d) / (w + 1.0f);
+  v->weight = (w + 1.0f < max_weight) ? w + 1.0f : max_weight;
+  return 1;
+}
+
+/* Integrates the depth map into one voxel whose centre is p_W (world frame).
+ * T_C_W is row-major 3x4 (rotation | translation) mapping world to camera.
+ * depth: row-major, width x height metres of range along the ray, NaN invalid. */
+FM_FN int fm_tsdf_integrate_voxel(FM_GLOBAL struct FmVoxel* v, float px, float py, float pz,
+                                  const FM_CAM_FLOAT* cam, const float* T_C_W,
+                                  FM_GLOBAL const float* depth, float mu, float max_weight) {
+  const float x = T_C_W[0] * px + T_C_W[1] * py + T_C_W[2] * pz + T_C_W[3];
+  const float y = T_C_W[4] * px + T_C_W[5] * py + T_C_W[6] * pz + T_C_W[7];
+  const float z = T_C_W[8] * px + T_C_W[9] * py + T_C_W[10] * pz + T_C_W[11];
+  float u, vv;
+  if (!fm_project(cam, x, y, z, &u, &vv)) {
+    return 0;
+  }
+  /* nearest pixel */
+  const int iu = (int)(u + 0.5f);
+  const int iv = (int)(vv + 0.5f);
+  if (u < -0.5f || vv < -0.5f || iu < 0 || iv < 0 || iu >= cam->width || iv >= cam->height) {
+    return 0;
+  }
+  const float measured = depth[iv * cam->width + iu];
+  if (!(measured > 0.0f) || measured != measured || measured > 1e30f) {
+    return 0; /* NaN, inf or non-positive: no measurement */
+  }
+  const float range = FM_SQRT(x * x + y * y + z * z);
+  return fm_tsdf_update(v, measured - range, mu, max_weight);
+}
+
+#ifndef FM_OPENCL
+}  // namespace fisheye_mapping
+#endif
+
+#endif /* FISHEYE_MAPPING_CORE_TSDF_TSDF_SHARED_H_ */

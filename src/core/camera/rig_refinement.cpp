@@ -1,0 +1,565 @@
+#include "fisheye_mapping/core/camera/rig_refinement.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <random>
+#include <sstream>
+#include <stdexcept>
+
+#include <opencv2/core/hal/hal.hpp>
+#include <opencv2/features2d.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/video/tracking.hpp>
+
+namespace fisheye_mapping {
+namespace {
+
+constexpr double kDeg = M_PI / 180.0;
+
+void require(bool ok, const std::string& field, const std::string& what) {
+  if (!ok) throw std::invalid_argument(field + ": " + what);
+}
+
+std::string sizeText(const cv::Mat& m) {
+  std::ostringstream os;
+  os << m.cols << "x" << m.rows;
+  return os.str();
+}
+
+// Rotation exp(w) of an so(3) vector.
+Eigen::Matrix3d expSo3(const Eigen::Vector3d& w) {
+  const double a = w.norm();
+  if (a < 1e-15) return Eigen::Matrix3d::Identity();
+  return Eigen::AngleAxisd(a, w / a).toRotationMatrix();
+}
+
+struct Match {
+  Eigen::Vector3d f_ref, f_cam;  // unit bearings in each camera's frame
+  double weight = 1.0;           // inverse variance of the residual, relative
+};
+
+// Pixels per radian of the image around ray f (mean over two directions).
+double pixelsPerRadian(const CameraModel& model, const Eigen::Vector3d& f) {
+  const double d = 1e-4;
+  Eigen::Vector2d uv, uv1, uv2;
+  const Eigen::Vector3d a = f.unitOrthogonal(), b = f.cross(a);
+  if (!model.project(f, &uv) || !model.project(f + d * a, &uv1) || !model.project(f + d * b, &uv2)) return 0.0;
+  return std::sqrt(0.5 * ((uv1 - uv).squaredNorm() + (uv2 - uv).squaredNorm())) / d;
+}
+
+// Parameters of one camera's fit: rotation R_ref_cam = R0 * exp(w) and, with
+// translation refinement, t = |t0| * normalize(t0_dir + B v).
+class EpipolarModel {
+ public:
+  EpipolarModel(const Eigen::Matrix3d& R0, const Eigen::Vector3d& t0, bool refine_t)
+      : R0_(R0), t0_(t0.normalized()), n_(refine_t ? 5 : 3) {
+    Eigen::Vector3d a = std::abs(t0_.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+    B_.col(0) = t0_.cross(a).normalized();
+    B_.col(1) = t0_.cross(B_.col(0));
+  }
+  int params() const { return n_; }
+  Eigen::Matrix3d rotation(const Eigen::VectorXd& x) const { return R0_ * expSo3(x.head<3>()); }
+  // Unit translation direction.
+  Eigen::Vector3d direction(const Eigen::VectorXd& x) const {
+    if (n_ == 3) return t0_;
+    return (t0_ + B_ * x.tail<2>()).normalized();
+  }
+  // Symmetric angular epipolar residual (radians): the triple product over the
+  // mean sine of both rays' angles to the baseline.
+  static double residual(const Eigen::Matrix3d& R, const Eigen::Vector3d& t, const Match& m) {
+    const Eigen::Vector3d g = R * m.f_cam;
+    const double e = m.f_ref.dot(t.cross(g));
+    const double s = std::sqrt(0.5 * (t.cross(m.f_ref).squaredNorm() + t.cross(g).squaredNorm()));
+    return e / s;
+  }
+  double residual(const Eigen::VectorXd& x, const Match& m) const { return residual(rotation(x), direction(x), m); }
+
+ private:
+  Eigen::Matrix3d R0_;
+  Eigen::Vector3d t0_;
+  Eigen::Matrix<double, 3, 2> B_;
+  int n_;
+};
+
+// Gauss-Newton from x over the matches idx with Huber scale `huber` (radians;
+// <= 0: plain least squares). Numeric Jacobians (central differences). False
+// when the normal equations are singular.
+bool gaussNewton(const EpipolarModel& model, const std::vector<Match>& matches, const std::vector<int>& idx,
+                 double huber, int iterations, Eigen::VectorXd* x) {
+  const int n = model.params();
+  const double h = 1e-6;
+  for (int it = 0; it < iterations; ++it) {
+    Eigen::MatrixXd H = Eigen::MatrixXd::Zero(n, n);
+    Eigen::VectorXd b = Eigen::VectorXd::Zero(n);
+    const Eigen::Matrix3d R = model.rotation(*x);
+    const Eigen::Vector3d t = model.direction(*x);
+    std::vector<Eigen::Matrix3d> Rp(n), Rm(n);
+    std::vector<Eigen::Vector3d> tp(n), tm(n);
+    for (int k = 0; k < n; ++k) {
+      Eigen::VectorXd xp = *x, xm = *x;
+      xp[k] += h, xm[k] -= h;
+      Rp[k] = model.rotation(xp), Rm[k] = model.rotation(xm);
+      tp[k] = model.direction(xp), tm[k] = model.direction(xm);
+    }
+    Eigen::VectorXd J(n);
+    for (int i : idx) {
+      const Match& m = matches[i];
+      const double r = EpipolarModel::residual(R, t, m);
+      for (int k = 0; k < n; ++k)
+        J[k] = (EpipolarModel::residual(Rp[k], tp[k], m) - EpipolarModel::residual(Rm[k], tm[k], m)) / (2 * h);
+      // Huber on the residual scaled to the image's angular resolution.
+      const double rw = r * std::sqrt(m.weight);
+      const double w = m.weight * ((huber <= 0 || std::abs(rw) <= huber) ? 1.0 : huber / std::abs(rw));
+      H.noalias() += w * J * J.transpose();
+      b.noalias() += w * J * r;
+    }
+    Eigen::LDLT<Eigen::MatrixXd> ldlt(H);
+    if (ldlt.info() != Eigen::Success || !(H.diagonal().minCoeff() > 0)) return false;
+    const Eigen::VectorXd dx = -ldlt.solve(b);
+    if (!dx.allFinite()) return false;
+    *x += dx;
+    if (dx.norm() < 1e-12) break;
+  }
+  return x->allFinite();
+}
+
+std::vector<int> inliersOf(const EpipolarModel& model, const std::vector<Match>& matches,
+                           const Eigen::VectorXd& x, double threshold) {
+  const Eigen::Matrix3d R = model.rotation(x);
+  const Eigen::Vector3d t = model.direction(x);
+  std::vector<int> in;
+  for (int i = 0; i < int(matches.size()); ++i)
+    if (std::abs(EpipolarModel::residual(R, t, matches[i])) < threshold) in.push_back(i);
+  return in;
+}
+
+double rmsOf(const EpipolarModel& model, const std::vector<Match>& matches, const std::vector<int>& idx,
+             const Eigen::VectorXd& x) {
+  if (idx.empty()) return 0.0;
+  const Eigen::Matrix3d R = model.rotation(x);
+  const Eigen::Vector3d t = model.direction(x);
+  double s = 0;
+  for (int i : idx) s += std::pow(EpipolarModel::residual(R, t, matches[i]), 2);
+  return std::sqrt(s / idx.size());
+}
+
+struct Features {
+  std::vector<cv::KeyPoint> keypoints;
+  cv::Mat descriptors;
+  std::vector<Eigen::Vector3d> rays;  // unit bearings, NaN where a keypoint does not unproject
+};
+
+// Bearings of keypoints (NaN where a keypoint does not unproject).
+std::vector<Eigen::Vector3d> bearings(const CameraModel& model, const std::vector<cv::KeyPoint>& kps) {
+  std::vector<Eigen::Vector3d> out(kps.size());
+  for (size_t i = 0; i < kps.size(); ++i) {
+    Eigen::Vector3d r;
+    if (model.unproject(Eigen::Vector2d(kps[i].pt.x, kps[i].pt.y), &r)) out[i] = r.normalized();
+    else out[i].setConstant(NAN);
+  }
+  return out;
+}
+
+// Guided matching: a reference feature is compared only with the support
+// features whose rays (rotated by R into the reference frame) lie within
+// max_residual of its epipolar plane around the baseline t (unit); among those,
+// mutual best Hamming matches that pass the ratio test.
+std::vector<std::pair<int, int>> matchGuided(const Features& a, const Features& b, const Eigen::Matrix3d& R,
+                                             const Eigen::Vector3d& t, double max_residual, double ratio,
+                                             int max_hamming) {
+  const std::vector<Eigen::Vector3d>& fa = a.rays;
+  const std::vector<Eigen::Vector3d>& fb = b.rays;
+  std::vector<std::pair<int, int>> out;
+  if (a.descriptors.empty() || b.descriptors.empty()) return out;
+  // Angle of each ray's epipolar plane around the baseline.
+  const Eigen::Vector3d e1 = t.unitOrthogonal(), e2 = t.cross(e1);
+  const double min_sin = std::sin(2.0 * kDeg);
+  struct Ray {
+    double phi;
+    int index;
+    Eigen::Vector3d g;  // ray in the reference frame
+    double s2;          // squared sine of its angle to the baseline
+  };
+  std::vector<Ray> rb;
+  for (int j = 0; j < int(fb.size()); ++j) {
+    if (!fb[j].allFinite()) continue;
+    const Eigen::Vector3d g = R * fb[j];
+    const double s2 = t.cross(g).squaredNorm();
+    if (s2 < min_sin * min_sin) continue;
+    rb.push_back({std::atan2(g.dot(e2), g.dot(e1)), j, g, s2});
+  }
+  std::sort(rb.begin(), rb.end(), [](const Ray& x, const Ray& y) { return x.phi < y.phi; });
+  std::vector<double> phis(rb.size());
+  for (size_t k = 0; k < rb.size(); ++k) phis[k] = rb[k].phi;
+  const int na = int(fa.size()), nb = int(fb.size());
+  std::vector<int> best_a(na, -1), best_b(nb, -1);
+  std::vector<int> dist_a(na, INT32_MAX), second_a(na, INT32_MAX), dist_b(nb, INT32_MAX);
+  const int bytes = a.descriptors.cols;
+  for (int i = 0; i < na; ++i) {
+    if (!fa[i].allFinite()) continue;
+    const Eigen::Vector3d n = fa[i].cross(t);  // f . (t x g) = g . (f x t)
+    const double s0 = n.norm();
+    if (s0 < min_sin) continue;
+    const double phi = std::atan2(fa[i].dot(e2), fa[i].dot(e1));
+    const double delta = std::min(M_PI, 2.0 * max_residual / s0);
+    const uint8_t* da = a.descriptors.ptr<uint8_t>(i);
+    auto scan = [&](double lo, double hi) {
+      const size_t k0 = std::lower_bound(phis.begin(), phis.end(), lo) - phis.begin();
+      for (size_t k = k0; k < phis.size() && phis[k] <= hi; ++k) {
+        const Ray& ray = rb[k];
+        const int j = ray.index;
+        const double e = ray.g.dot(n);
+        if (e * e > max_residual * max_residual * 0.5 * (s0 * s0 + ray.s2)) continue;
+        const int d = cv::hal::normHamming(da, b.descriptors.ptr<uint8_t>(j), bytes);
+        if (d < dist_a[i]) {
+          second_a[i] = dist_a[i];
+          dist_a[i] = d;
+          best_a[i] = j;
+        } else if (d < second_a[i]) {
+          second_a[i] = d;
+        }
+        if (d < dist_b[j]) dist_b[j] = d, best_b[j] = i;
+      }
+    };
+    if (delta >= M_PI) {
+      scan(-M_PI - 1, M_PI + 1);
+      continue;
+    }
+    scan(phi - delta, phi + delta);
+    if (phi - delta < -M_PI) scan(phi - delta + 2 * M_PI, M_PI + 1);
+    if (phi + delta > M_PI) scan(-M_PI - 1, phi + delta - 2 * M_PI);
+  }
+  for (int i = 0; i < na; ++i) {
+    const int j = best_a[i];
+    if (j < 0 || best_b[j] != i || dist_a[i] > max_hamming) continue;
+    if (second_a[i] != INT32_MAX && dist_a[i] >= ratio * second_a[i]) continue;
+    out.emplace_back(i, j);
+  }
+  return out;
+}
+
+}  // namespace
+
+void RigRefinementConfig::validate() const {
+  require(max_features >= 10, "max_features", "must be >= 10");
+  require(pyramid_levels >= 1 && pyramid_levels <= 12, "pyramid_levels", "must be in [1, 12]");
+  require(ratio > 0 && ratio <= 1, "ratio", "must be in (0, 1]");
+  require(max_hamming >= 0 && max_hamming <= 256, "max_hamming", "must be in [0, 256]");
+  require(klt_window >= 5 && klt_window <= 51, "klt_window", "must be in [5, 51]");
+  require(min_inliers >= 5, "min_inliers", "must be >= 5");
+  require(max_initial_residual_deg > 0 && max_initial_residual_deg < 45, "max_initial_residual_deg",
+          "must be in (0, 45)");
+  require(ransac_threshold_deg > 0 && ransac_threshold_deg <= max_initial_residual_deg, "ransac_threshold_deg",
+          "must be in (0, max_initial_residual_deg]");
+  require(ransac_iterations >= 1, "ransac_iterations", "must be >= 1");
+  require(huber_deg > 0, "huber_deg", "must be positive");
+  require(max_iterations >= 1, "max_iterations", "must be >= 1");
+}
+
+const char* toString(CameraRefinement::Status status) {
+  switch (status) {
+    case CameraRefinement::Status::kReference: return "reference";
+    case CameraRefinement::Status::kApplied: return "applied";
+    case CameraRefinement::Status::kTooFewInliers: return "too few inliers";
+    case CameraRefinement::Status::kNotImproved: return "not improved";
+  }
+  return "?";
+}
+
+int RigRefinementResult::applied() const {
+  return int(std::count_if(cameras.begin(), cameras.end(),
+                           [](const CameraRefinement& c) { return c.status == CameraRefinement::Status::kApplied; }));
+}
+
+int RigRefinementResult::totalInliers() const {
+  int n = 0;
+  for (const auto& c : cameras)
+    if (c.status != CameraRefinement::Status::kReference) n += c.inliers;
+  return n;
+}
+
+Rig withRelativePose(const Rig& rig, int reference, int camera, const Eigen::Isometry3d& T_ref_cam) {
+  const int n = int(rig.cameras.size());
+  if (reference < 0 || reference >= n) throw std::invalid_argument("reference camera index out of range");
+  if (camera < 0 || camera >= n) throw std::invalid_argument("camera index out of range");
+  Rig out = rig;
+  // In the base frame, then every camera re-expressed relative to cam0.
+  out.cameras[camera].T_base_cam = rig.cameras[reference].T_base_cam * T_ref_cam;
+  const Eigen::Isometry3d T_cam0_base = out.cameras[0].T_base_cam.inverse();
+  for (auto& c : out.cameras) c.T_cam0_cam = T_cam0_base * c.T_base_cam;
+  out.cameras[0].T_cam0_cam = Eigen::Isometry3d::Identity();
+  return out;
+}
+
+RigRefinementResult refineRig(const Rig& rig, int reference, const std::vector<std::vector<cv::Mat>>& frame_sets,
+                              const std::vector<cv::Mat>& self_masks, const RigRefinementConfig& config) {
+  config.validate();
+  const int n_cams = int(rig.cameras.size());
+  require(n_cams >= 2, "rig", "needs at least two cameras, has " + std::to_string(n_cams));
+  require(reference >= 0 && reference < n_cams, "reference",
+          "camera index " + std::to_string(reference) + " is not in [0, " + std::to_string(n_cams) + ")");
+  require(!frame_sets.empty(), "frame_sets", "no frame set given");
+  for (size_t k = 0; k < frame_sets.size(); ++k) {
+    const std::string where = "frame set " + std::to_string(k);
+    require(int(frame_sets[k].size()) == n_cams, where,
+            "has " + std::to_string(frame_sets[k].size()) + " images, the rig has " + std::to_string(n_cams) +
+                " cameras");
+    for (int c = 0; c < n_cams; ++c) {
+      const cv::Mat& im = frame_sets[k][c];
+      const RigCamera& cam = rig.cameras[c];
+      require(!im.empty(), where + ", " + cam.name, "image is empty");
+      require(im.type() == CV_8UC1, where + ", " + cam.name, "image must be 8-bit single-channel (CV_8UC1)");
+      require(im.cols == cam.model.width() && im.rows == cam.model.height(), where + ", " + cam.name,
+              "image is " + sizeText(im) + ", calibration says " + std::to_string(cam.model.width()) + "x" +
+                  std::to_string(cam.model.height()));
+    }
+  }
+  require(self_masks.empty() || int(self_masks.size()) == n_cams, "self_masks",
+          "need none or one per camera (" + std::to_string(n_cams) + "), got " + std::to_string(self_masks.size()));
+  // Where features may be detected: outside the self-mask.
+  std::vector<cv::Mat> detect_mask(n_cams);
+  for (int c = 0; c < n_cams; ++c) {
+    const RigCamera& cam = rig.cameras[c];
+    if (self_masks.empty() || self_masks[c].empty()) continue;
+    const cv::Mat& m = self_masks[c];
+    require(m.type() == CV_8UC1, "self-mask of " + cam.name, "must be 8-bit single-channel (CV_8UC1)");
+    require(m.cols == cam.model.width() && m.rows == cam.model.height(), "self-mask of " + cam.name,
+            "is " + sizeText(m) + ", calibration says " + std::to_string(cam.model.width()) + "x" +
+                std::to_string(cam.model.height()));
+    detect_mask[c] = m == 0;
+  }
+  RigRefinementResult result;
+  result.rig = rig;
+  result.frame_sets = int(frame_sets.size());
+  result.cameras.resize(n_cams);
+  for (int c = 0; c < n_cams; ++c) {
+    result.cameras[c].camera = c;
+    result.cameras[c].name = rig.cameras[c].name;
+  }
+
+  // Calibrated pose of each camera relative to the reference.
+  const Eigen::Isometry3d T_base_ref = rig.cameras[reference].T_base_cam;
+  std::vector<Eigen::Isometry3d> T_ref(n_cams);
+  for (int c = 0; c < n_cams; ++c) {
+    T_ref[c] = T_base_ref.inverse() * rig.cameras[c].T_base_cam;
+    if (c != reference)
+      require(T_ref[c].translation().norm() > 1e-6, rig.cameras[c].name, "has no baseline to the reference camera");
+  }
+
+  // Features come from the reference image and from each support image,
+  // resampled (warp_support) into the reference camera's geometry through the
+  // calibrated rotation: patches then look alike in both, whatever the
+  // cameras' yaw, and only parallax separates them. feature_mask: where
+  // features may lie (outside self-masks, inside the resampled view).
+  const CameraModel& ref_model = rig.cameras[reference].model;
+  const auto geometry = [&](int c) -> const CameraModel& {
+    return config.warp_support ? ref_model : rig.cameras[c].model;
+  };
+  std::vector<cv::Mat> map_x(n_cams), map_y(n_cams), feature_mask = detect_mask;
+  if (config.warp_support) {
+    const std::vector<Eigen::Vector3f> rays = pixelRays(ref_model);
+    const int w = ref_model.width(), h = ref_model.height();
+    for (int c = 0; c < n_cams; ++c) {
+      if (c == reference) continue;
+      const CameraModel& model = rig.cameras[c].model;
+      const Eigen::Matrix3f R_cam_ref = T_ref[c].linear().transpose().cast<float>();
+      map_x[c].create(h, w, CV_32FC1);
+      map_y[c].create(h, w, CV_32FC1);
+      cv::Mat valid(h, w, CV_8UC1);
+      for (int v = 0; v < h; ++v) {
+        for (int u = 0; u < w; ++u) {
+          const Eigen::Vector3f& r = rays[size_t(v) * w + u];
+          Eigen::Vector2d uv;
+          const bool ok = r.allFinite() && model.project((R_cam_ref * r).cast<double>(), &uv) &&
+                          model.isInImage(uv, 1.0) &&
+                          (detect_mask[c].empty() || detect_mask[c].at<uint8_t>(int(std::lround(uv.y())),
+                                                                              int(std::lround(uv.x()))) != 0);
+          map_x[c].at<float>(v, u) = ok ? float(uv.x()) : -1.0f;
+          map_y[c].at<float>(v, u) = ok ? float(uv.y()) : -1.0f;
+          valid.at<uint8_t>(v, u) = ok ? 255 : 0;
+        }
+      }
+      // Keep ORB's and KLT's windows off the border of the resampled view.
+      cv::erode(valid, feature_mask[c], cv::getStructuringElement(cv::MORPH_RECT, cv::Size(33, 33)));
+    }
+  }
+  const auto masked = [&](int c, const cv::Point2f& p) {
+    if (feature_mask[c].empty()) return false;
+    const int u = int(std::lround(p.x)), v = int(std::lround(p.y));
+    if (u < 0 || v < 0 || u >= feature_mask[c].cols || v >= feature_mask[c].rows) return true;
+    return feature_mask[c].at<uint8_t>(v, u) == 0;
+  };
+
+  // Matches per support camera, pooled over the frame sets.
+  std::vector<std::vector<Match>> pooled(n_cams);
+  std::vector<int> raw_matches(n_cams, 0);
+  for (const auto& set : frame_sets) {
+    // The images features are taken from: each support image resampled into
+    // the reference geometry, or as recorded.
+    std::vector<cv::Mat> image(n_cams);
+    for (int c = 0; c < n_cams; ++c) {
+      if (!config.warp_support || c == reference) image[c] = set[c];
+      else cv::remap(set[c], image[c], map_x[c], map_y[c], cv::INTER_LINEAR, cv::BORDER_CONSTANT);  // new buffer
+    }
+    std::vector<Features> feats(n_cams);
+#pragma omp parallel for schedule(dynamic)
+    for (int c = 0; c < n_cams; ++c) {
+      auto orb = cv::ORB::create(config.max_features, 1.2f, config.pyramid_levels, 31, 0, 2, cv::ORB::HARRIS_SCORE,
+                                 31, 10);
+      orb->detectAndCompute(image[c], feature_mask[c].empty() ? cv::noArray() : cv::InputArray(feature_mask[c]),
+                            feats[c].keypoints, feats[c].descriptors);
+      feats[c].rays = bearings(geometry(c), feats[c].keypoints);
+    }
+    std::vector<std::vector<Match>> found(n_cams);
+#pragma omp parallel for schedule(dynamic)
+    for (int c = 0; c < n_cams; ++c) {
+      if (c == reference) continue;
+      // Warped features are rays of the reference frame: R = I for the epipolar window.
+      const Eigen::Matrix3d R_match =
+          config.warp_support ? Eigen::Matrix3d::Identity() : Eigen::Matrix3d(T_ref[c].linear());
+      const auto dm = matchGuided(feats[reference], feats[c], R_match, T_ref[c].translation().normalized(),
+                                  config.max_initial_residual_deg * kDeg, config.ratio, config.max_hamming);
+      raw_matches[c] += int(dm.size());
+      std::vector<cv::Point2f> p_ref, p_cam;
+      for (const auto& [i, j] : dm) {
+        p_ref.push_back(feats[reference].keypoints[i].pt);
+        p_cam.push_back(feats[c].keypoints[j].pt);
+      }
+      std::vector<uint8_t> ok(p_ref.size(), 1);
+      if (config.subpixel && !p_ref.empty()) {
+        // The support keypoint moved to where the reference patch fits best.
+        std::vector<cv::Point2f> refined = p_cam;
+        std::vector<float> err;
+        cv::calcOpticalFlowPyrLK(image[reference], image[c], p_ref, refined, ok, err,
+                                 cv::Size(config.klt_window, config.klt_window), 1,
+                                 cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 30, 0.005),
+                                 cv::OPTFLOW_USE_INITIAL_FLOW);
+        for (size_t i = 0; i < refined.size(); ++i) {
+          if (ok[i] && cv::norm(refined[i] - p_cam[i]) < 3.0) p_cam[i] = refined[i];
+          else ok[i] = 0;
+        }
+      }
+      const CameraModel& m_ref = rig.cameras[reference].model;
+      const CameraModel& m_cam = rig.cameras[c].model;
+      const Eigen::Matrix3d R_cam_ref = T_ref[c].linear().transpose();
+      for (size_t i = 0; i < p_ref.size(); ++i) {
+        if (!ok[i] || masked(reference, p_ref[i]) || masked(c, p_cam[i])) continue;
+        Match m;
+        if (!m_ref.unproject(Eigen::Vector2d(p_ref[i].x, p_ref[i].y), &m.f_ref)) continue;
+        if (!geometry(c).unproject(Eigen::Vector2d(p_cam[i].x, p_cam[i].y), &m.f_cam)) continue;
+        m.f_ref.normalize(), m.f_cam.normalize();
+        // A warped pixel's ray is the support camera's ray rotated by the calibration.
+        if (config.warp_support) m.f_cam = R_cam_ref * m.f_cam;
+        if (config.weight_by_resolution) {
+          // Pixel noise in both images as an angle: 1/s0^2 + 1/s1^2.
+          const double s0 = pixelsPerRadian(m_ref, m.f_ref), s1 = pixelsPerRadian(m_cam, m.f_cam);
+          if (!(s0 > 0 && s1 > 0)) continue;
+          m.weight = 1.0 / (1.0 / (s0 * s0) + 1.0 / (s1 * s1));
+        }
+        found[c].push_back(m);
+      }
+    }
+    for (int c = 0; c < n_cams; ++c) pooled[c].insert(pooled[c].end(), found[c].begin(), found[c].end());
+  }
+
+  std::mt19937_64 rng(config.seed);
+  for (int c = 0; c < n_cams; ++c) {
+    CameraRefinement& out = result.cameras[c];
+    if (c == reference) continue;
+    out.matches = raw_matches[c];
+    const Eigen::Isometry3d& T_ref_cam = T_ref[c];
+    const Eigen::Vector3d t0 = T_ref_cam.translation();
+    const EpipolarModel model(T_ref_cam.linear(), t0, config.refine_translation);
+    const Eigen::Vector3d t_dir = t0.normalized();
+    const Eigen::Matrix3d R0 = T_ref_cam.linear();
+
+    // Candidates: near the epipolar plane at the calibration, away from the
+    // epipoles, and in front of both cameras (or too distant to tell).
+    std::vector<Match> cand;
+    const double min_sin = std::sin(2.0 * kDeg);
+    for (const Match& m : pooled[c]) {
+      const Eigen::Vector3d g = R0 * m.f_cam;
+      if (t_dir.cross(m.f_ref).norm() < min_sin || t_dir.cross(g).norm() < min_sin) continue;
+      if (std::abs(EpipolarModel::residual(R0, t_dir, m)) > config.max_initial_residual_deg * kDeg) continue;
+      if (std::acos(std::clamp(m.f_ref.dot(g), -1.0, 1.0)) > 1.0 * kDeg) {
+        // lambda_ref f_ref - lambda_cam g = t in the least-squares sense.
+        Eigen::Matrix<double, 3, 2> A;
+        A << m.f_ref, -g;
+        const Eigen::Vector2d lambda = (A.transpose() * A).ldlt().solve(A.transpose() * t0);
+        if (!(lambda.x() > 0 && lambda.y() > 0)) continue;
+      }
+      cand.push_back(m);
+    }
+    out.candidates = int(cand.size());
+    if (!cand.empty()) {
+      // Relative weights: 1 at the median, so that Huber's scale stays in degrees.
+      std::vector<double> w;
+      for (const Match& m : cand) w.push_back(m.weight);
+      std::nth_element(w.begin(), w.begin() + w.size() / 2, w.end());
+      for (Match& m : cand) m.weight /= w[w.size() / 2];
+    }
+    const int n_par = model.params();
+    const Eigen::VectorXd x0 = Eigen::VectorXd::Zero(n_par);
+    const double thr = config.ransac_threshold_deg * kDeg;
+    const std::vector<int> inliers_before = inliersOf(model, cand, x0, thr);
+    std::vector<int> best;
+    Eigen::VectorXd x = x0;
+    if (int(cand.size()) >= std::max(config.min_inliers, n_par)) {
+      // RANSAC: rotation (and direction) from minimal samples, started at the calibration.
+      best = inliers_before;
+      std::uniform_int_distribution<int> pick(0, int(cand.size()) - 1);
+      for (int it = 0; it < config.ransac_iterations; ++it) {
+        std::vector<int> sample;
+        while (int(sample.size()) < n_par) {
+          const int i = pick(rng);
+          if (std::find(sample.begin(), sample.end(), i) == sample.end()) sample.push_back(i);
+        }
+        Eigen::VectorXd xs = x0;
+        if (!gaussNewton(model, cand, sample, 0.0, 8, &xs)) continue;
+        if (xs.head<3>().norm() > 2 * config.max_initial_residual_deg * kDeg) continue;
+        std::vector<int> in = inliersOf(model, cand, xs, thr);
+        if (in.size() > best.size()) best.swap(in);
+      }
+      // Huber Gauss-Newton on the inliers, then once more on the inliers of the fit.
+      for (int round = 0; round < 3 && int(best.size()) >= n_par; ++round) {
+        Eigen::VectorXd xr = x;
+        if (!gaussNewton(model, cand, best, config.huber_deg * kDeg, config.max_iterations, &xr)) break;
+        x = xr;
+        std::vector<int> in = inliersOf(model, cand, x, thr);
+        if (in == best) break;
+        best.swap(in);
+      }
+    }
+    out.inliers = int(best.size());
+    if (out.inliers < config.min_inliers) {
+      out.status = CameraRefinement::Status::kTooFewInliers;
+      out.message = std::to_string(out.candidates) + " candidate matches, " + std::to_string(out.inliers) +
+                    " inliers; need " + std::to_string(config.min_inliers) + " inliers";
+      out.rms_before_deg = out.rms_after_deg = rmsOf(model, cand, inliers_before, x0) / kDeg;
+      continue;
+    }
+    out.rms_before_deg = rmsOf(model, cand, best, x0) / kDeg;
+    out.rms_after_deg = rmsOf(model, cand, best, x) / kDeg;
+    const Eigen::Matrix3d dR = expSo3(x.head<3>());
+    const Eigen::AngleAxisd aa(dR);
+    if (out.rms_after_deg >= out.rms_before_deg || best.size() < inliers_before.size()) {
+      out.status = CameraRefinement::Status::kNotImproved;
+      out.message = "the fit does not lower the residual or loses inliers";
+      continue;
+    }
+    out.status = CameraRefinement::Status::kApplied;
+    out.correction = dR;
+    out.correction_deg = aa.angle() / kDeg;
+    out.correction_axis = aa.angle() > 0 ? aa.axis() : Eigen::Vector3d::Zero();
+    Eigen::Isometry3d T_new = T_ref_cam;
+    T_new.linear() = model.rotation(x);
+    T_new.translation() = model.direction(x) * t0.norm();
+    out.translation_change_deg =
+        std::acos(std::clamp(model.direction(x).dot(t_dir), -1.0, 1.0)) / kDeg;
+    result.rig = withRelativePose(result.rig, reference, c, T_new);
+  }
+  return result;
+}
+
+}  // namespace fisheye_mapping

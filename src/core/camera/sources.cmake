@@ -1,0 +1,7 @@
+# Sources of the core's camera stage (included by CMakeLists.txt).
+set(FM_CAMERA_SOURCES
+  camera_model.cpp
+  rig_calibration.cpp
+  rig_geometry.cpp
+  rig_refinement.cpp
+)

@@ -1,0 +1,5 @@
+# Sources of the core's detection stage (included by CMakeLists.txt).
+set(FM_DETECTION_SOURCES
+  detector.cpp
+  depth_mask.cpp
+)

@@ -1,0 +1,3 @@
+# Sources of the core's mapping stage (included by CMakeLists.txt).
+set(FM_MAPPING_SOURCES
+)

@@ -1,0 +1,4 @@
+# Sources of the core's sim stage (included by CMakeLists.txt).
+set(FM_SIM_SOURCES
+  synthetic_world.cpp
+)

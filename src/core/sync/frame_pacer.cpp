@@ -1,0 +1,44 @@
+#include "fisheye_mapping/core/sync/frame_pacer.h"
+
+#include <cstdio>
+#include <limits>
+#include <stdexcept>
+
+namespace fisheye_mapping {
+
+FramePacer::FramePacer(const std::string& reference_topic, const std::vector<std::string>& image_topics)
+    : reference_(reference_topic) {
+  for (const auto& t : image_topics) {
+    if (!last_.emplace(t, -std::numeric_limits<double>::infinity()).second) {
+      throw std::invalid_argument("image topic '" + t + "' is listed twice");
+    }
+  }
+  if (!last_.count(reference_)) {
+    throw std::invalid_argument("the reference topic '" + reference_ + "' is not one of the image topics");
+  }
+}
+
+FramePacer::Step FramePacer::next(const std::string& topic, double stamp) {
+  Step step;
+  auto it = last_.find(topic);
+  if (it == last_.end()) return step;  // not an image: publish in bag order
+  const double previous = it->second;
+  if (stamp < previous) {
+    char buf[256];
+    std::snprintf(buf, sizeof(buf), "stamps go backwards on %s: %.6f after %.6f", topic.c_str(), stamp, previous);
+    step.kind = Step::kStampsBackwards;
+    step.error = buf;
+    return step;
+  }
+  it->second = stamp;
+  if (topic == reference_ && stamp > previous) {
+    if (frames_ > 0) {
+      step.kind = Step::kWaitThenPublish;
+      step.wait_for = previous;
+    }
+    ++frames_;
+  }
+  return step;
+}
+
+}  // namespace fisheye_mapping

@@ -1,0 +1,4 @@
+# Sources of the core's sync stage (included by CMakeLists.txt).
+set(FM_SYNC_SOURCES
+  frame_pacer.cpp
+)

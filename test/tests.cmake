@@ -1,0 +1,78 @@
+# The package's tests, one fm_add_test per test (cmake/fm_test.cmake).
+# Included by CMakeLists.txt when CATKIN_ENABLE_TESTING is on.
+find_package(rostest REQUIRED)
+include(${PROJECT_SOURCE_DIR}/cmake/fm_test.cmake)
+
+# --- camera and rig --------------------------------------------------------
+fm_add_test(test_camera_model SOURCES test/test_camera_model.cpp)
+fm_add_test(test_camera_model_opencl SOURCES test/test_camera_model_opencl.cpp)
+fm_add_test(test_rig_calibration SOURCES test/test_rig_calibration.cpp)
+fm_add_test(test_rig_info SOURCES test/test_rig_info.cpp DEPENDS rig_info)
+fm_add_test(test_rig_refinement SOURCES test/test_rig_refinement.cpp DEPENDS refine_rig make_drive)
+fm_add_test(test_rig_tf_publisher ROSTEST test/launch/rig_tf_publisher.test
+  SOURCES test/test_rig_tf_publisher.cpp DEPENDS fisheye_mapping_nodelets)
+
+# --- frame sets and playback -----------------------------------------------
+fm_add_test(test_frame_sync SOURCES test/test_frame_sync.cpp)
+fm_add_test(test_frame_pacer SOURCES test/test_frame_pacer.cpp)
+fm_add_test(test_frame_sync_node ROSTEST test/launch/frame_sync.test
+  SOURCES test/test_frame_sync_node.cpp DEPENDS fisheye_mapping_nodelets)
+fm_add_test(test_paced_player_node ROSTEST test/launch/paced_player.test
+  SOURCES test/test_paced_player_node.cpp DEPENDS paced_player)
+fm_add_test(test_synthetic_drive SOURCES test/test_synthetic_drive.cpp DEPENDS make_drive)
+
+# --- plane-sweep depth -----------------------------------------------------
+fm_add_test(test_plane_sweep SOURCES test/test_plane_sweep.cpp)
+fm_add_test(test_plane_sweep_tool SOURCES test/test_plane_sweep_tool.cpp DEPENDS plane_sweep_depth)
+fm_add_test(test_depth_consistency SOURCES test/test_depth_consistency.cpp DEPENDS depth_eval)
+fm_add_test(test_plane_sweep_node ROSTEST test/launch/plane_sweep_depth.test
+  SOURCES test/test_plane_sweep_node.cpp DEPENDS fisheye_mapping_nodelets)
+
+# --- detection and masking -------------------------------------------------
+fm_add_test(test_detector SOURCES test/test_detector.cpp)
+fm_add_test(test_depth_mask SOURCES test/test_depth_mask.cpp)
+fm_add_test(test_dynamic_objects_node ROSTEST test/launch/dynamic_objects.test
+  SOURCES test/test_dynamic_objects_node.cpp DEPENDS fisheye_mapping_nodelets)
+
+# --- TSDF fusion and maps --------------------------------------------------
+fm_add_test(test_tsdf SOURCES test/test_tsdf.cpp)
+fm_add_test(test_tsdf_map_file SOURCES test/test_tsdf_map_file.cpp DEPENDS map_tool)
+fm_add_test(test_map_accuracy SOURCES test/test_map_accuracy.cpp DEPENDS map_accuracy)
+fm_add_test(test_tsdf_fusion_node ROSTEST test/launch/tsdf_fusion.test
+  SOURCES test/test_tsdf_fusion_node.cpp DEPENDS fisheye_mapping_nodelets)
+# The fusion node's life cycle: SIGTERM saves, a respawn keeps the saved map,
+# lost swap files do not abort. The test starts and signals the nodes itself.
+fm_add_test(test_tsdf_lifecycle_node ROSTEST test/launch/tsdf_lifecycle.test
+  SOURCES test/test_tsdf_lifecycle_node.cpp DEPENDS fisheye_mapping_nodelets)
+
+# --- the whole pipeline ----------------------------------------------------
+fm_add_test(test_offline_mapper SOURCES test/test_offline_mapper.cpp DEPENDS offline_mapper make_drive)
+fm_add_test(test_multihost SOURCES test/test_multihost.cpp DEPENDS fisheye_mapping_nodelets make_drive)
+fm_add_test(test_vehicle_e2e_node ROSTEST test/launch/vehicle_e2e.test
+  SOURCES test/test_vehicle_e2e_node.cpp DEPENDS fisheye_mapping_nodelets make_drive paced_player)
+# Time going backwards and stage faults: a drive played twice through sync,
+# depth and masking; a depth manager killed and respawned mid-drive.
+fm_add_test(test_time_reset_node ROSTEST test/launch/time_reset.test
+  SOURCES test/test_time_reset_node.cpp DEPENDS fisheye_mapping_nodelets make_drive paced_player)
+add_rostest(test/launch/depth_respawn.test DEPENDENCIES test_time_reset_node)
+
+# --- command-line tools ----------------------------------------------------
+# Option parsing (src/tools/cli.h), rejected inputs, and the regression inputs
+# of the fuzz targets (test/fuzz/<target>/, built with clang by scripts/fuzz)
+# replayed through the same entry points with the normal build.
+fm_add_test(test_tool_options SOURCES test/test_tool_options.cpp INCLUDES ${PROJECT_SOURCE_DIR}/src/tools
+  DEPENDS tsdf_benchmark depth_benchmark detector_benchmark detect_image)
+set(FM_FUZZ_TARGETS rig_yaml:fmFuzzRigYaml psl_calib:fmFuzzPslCalib tsdf_map_file:fmFuzzTsdfMapFile
+  rig_info_lines:fmFuzzRigInfoLines)
+set(FM_FUZZ_SOURCES "")
+foreach(fm_fuzz_pair ${FM_FUZZ_TARGETS})
+  string(REPLACE ":" ";" fm_fuzz_parts ${fm_fuzz_pair})
+  list(GET fm_fuzz_parts 0 fm_fuzz_target)
+  list(GET fm_fuzz_parts 1 fm_fuzz_entry)
+  set(fm_fuzz_file ${PROJECT_SOURCE_DIR}/test/fuzz/fuzz_${fm_fuzz_target}.cpp)
+  set_source_files_properties(${fm_fuzz_file} PROPERTIES
+    COMPILE_DEFINITIONS "FM_FUZZ_ENTRY=${fm_fuzz_entry};FM_FUZZ_IN_GTEST")
+  list(APPEND FM_FUZZ_SOURCES ${fm_fuzz_file})
+endforeach()
+fm_add_test(test_fuzz_regressions SOURCES test/test_fuzz_regressions.cpp ${FM_FUZZ_SOURCES}
+  INCLUDES ${PROJECT_SOURCE_DIR}/src/tools DEFINES FM_FUZZ_DIR="${PROJECT_SOURCE_DIR}/test/fuzz")
