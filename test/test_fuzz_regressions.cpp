@@ -2,7 +2,7 @@
 // each crash the fuzzers found, kept as regress-* files) through the fuzz
 // targets' own checks, built here with the normal compiler: a parser that
 // crashes, throws the wrong exception or breaks a checked invariant on any of
-// them aborts this test. scripts/fuzz runs the targets themselves with clang.
+// them aborts this test. scripts/checks/fuzz runs the targets themselves with clang.
 #include <gtest/gtest.h>
 
 #include <algorithm>
