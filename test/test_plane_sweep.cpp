@@ -324,7 +324,7 @@ TEST(PlaneSweepTexture, TexturelessRegionsAreFound) {
 
 TEST(PlaneSweepInput, BadInputGetsClearErrors) {
   fm::PlaneSweepConfig config;
-  config.backend = "cpu";
+  config.backend = fm::SweepBackendType::Cpu;
   fm::PlaneSweep sweep(config);
   fm::SweepView ref{"cam0", smallFisheye(), Eigen::Isometry3d::Identity(), cv::Mat(136, 256, CV_8UC1, cv::Scalar(9)), {}};
   fm::SweepView other = ref;
@@ -357,9 +357,12 @@ TEST(PlaneSweepInput, BadInputGetsClearErrors) {
   config = fm::PlaneSweepConfig();
   config.filters.delta = 2;
   EXPECT_THROW(fm::PlaneSweep{config}, std::invalid_argument);
-  config = fm::PlaneSweepConfig();
-  config.resolution = "quarter";
-  EXPECT_THROW(fm::PlaneSweep{config}, std::invalid_argument);
+  try {
+    (void)fm::parseSweepResolution("quarter");
+    FAIL() << "no error for an unknown resolution";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_EQ(std::string(e.what()).rfind("resolution:", 0), 0u) << e.what();
+  }
 }
 
 // ---------------------------------------------------------------------------
@@ -387,7 +390,7 @@ class PlaneSweepScene : public ::testing::Test {
     delete world_;
   }
 
-  static fm::PlaneSweepConfig config(const std::string& backend, const std::string& resolution) {
+  static fm::PlaneSweepConfig config(fm::SweepBackendType backend, fm::SweepResolution resolution) {
     fm::PlaneSweepConfig c;
     c.backend = backend;
     c.resolution = resolution;
@@ -431,9 +434,10 @@ class PlaneSweepBackends : public PlaneSweepScene, public ::testing::WithParamIn
 
 TEST_P(PlaneSweepBackends, AgreeWithTheReferenceImplementation) {
   const std::string backend = GetParam();
-  for (const std::string res : {"full", "multiscale"}) {
-    const fm::DepthResult cpu = run(config("cpu", res));
-    const fm::DepthResult cl = run(config(backend, res));
+  for (const fm::SweepResolution resolution : {fm::SweepResolution::Full, fm::SweepResolution::Multiscale}) {
+    const std::string res = fm::toString(resolution);
+    const fm::DepthResult cpu = run(config(fm::SweepBackendType::Cpu, resolution));
+    const fm::DepthResult cl = run(config(fm::parseSweepBackend(backend), resolution));
     ASSERT_EQ(cpu.used_views.size(), 2u);
     // The kernels' running float sums lose precision on nearly flat windows
     // (variance ~1e-4 next to mean^2 ~0.5); compare where there is texture.
@@ -466,8 +470,9 @@ TEST_P(PlaneSweepBackends, AgreeWithTheReferenceImplementation) {
 // every view's costs): the same comparison at half resolution, over textured
 // pixels (variance over the 7x7 window of the half-resolution image).
 TEST_P(PlaneSweepBackends, AgreeWithTheReferenceForBestK) {
-  fm::PlaneSweepConfig ref = config("cpu", "half"), ours = config(GetParam(), "half");
-  ref.aggregation = ours.aggregation = "best_k";
+  fm::PlaneSweepConfig ref = config(fm::SweepBackendType::Cpu, fm::SweepResolution::Half),
+                       ours = config(fm::parseSweepBackend(GetParam()), fm::SweepResolution::Half);
+  ref.aggregation = ours.aggregation = fm::SweepAggregation::BestK;
   const fm::DepthResult a = run(ref), b = run(ours);
   const cv::Mat textured = texturedPixels(2, 7);
   int both = 0, close = 0, costs_close = 0;
@@ -490,16 +495,15 @@ INSTANTIATE_TEST_SUITE_P(Products, PlaneSweepBackends, ::testing::Values("opencl
 
 TEST(PlaneSweepBackend, AutoTakesTheGpuElseTheNativeCpuBackend) {
   fm::PlaneSweepConfig c;
-  ASSERT_EQ(c.backend, "auto");
+  ASSERT_EQ(c.backend, fm::SweepBackendType::Auto);
   fm::PlaneSweep sweep(c);
   if (fm::OpenClContext::hasGpu()) {
     EXPECT_EQ(sweep.backendName().rfind("opencl", 0), 0u) << sweep.backendName();
   } else {
     EXPECT_EQ(sweep.backendName().rfind("native", 0), 0u) << sweep.backendName();
   }
-  c.backend = "gpu";
   try {
-    fm::PlaneSweep bad(c);
+    c.backend = fm::parseSweepBackend("gpu");
     FAIL() << "no error for an unknown backend";
   } catch (const std::invalid_argument& e) {
     EXPECT_EQ(std::string(e.what()).rfind("backend:", 0), 0u) << e.what();
@@ -524,7 +528,7 @@ TEST(PlaneSweepAccuracy, DepthMatchesTheRenderedTruthAndFiltersHelp) {
     if (c == 0) truth = frame.depth;
   }
   fm::PlaneSweepConfig c;
-  c.resolution = "full";
+  c.resolution = fm::SweepResolution::Full;
   c.min_parallax_px = 0.1;
   c.window_full = 7;
   fm::PlaneSweep sweep(c);
@@ -651,7 +655,7 @@ TEST_F(PlaneSweepScene, NonFiniteFloatPixelsAreMaskedWithAWarning) {
   // A float reference image with a NaN band and an infinite pixel: those
   // pixels (and the band) get no depth, the rest as from the 8-bit image, and
   // the result says how many were masked.
-  fm::PlaneSweepConfig c = config("native", "full");
+  fm::PlaneSweepConfig c = config(fm::SweepBackendType::Native, fm::SweepResolution::Full);
   fm::PlaneSweep sweep(c);
   cv::Mat ref;
   images_[0].convertTo(ref, CV_32F, 1.0 / 255);
@@ -685,7 +689,7 @@ TEST_F(PlaneSweepScene, NonFiniteFloatPixelsAreMaskedWithAWarning) {
 TEST_P(PlaneSweepBackends, SelfMaskedPixelsHaveNoDepth) {
   cv::Mat mask(images_[0].size(), CV_8UC1, cv::Scalar(0));
   mask.rowRange(100, 136).setTo(255);  // the "hood"
-  fm::PlaneSweepConfig c = config(GetParam(), "multiscale");
+  fm::PlaneSweepConfig c = config(fm::parseSweepBackend(GetParam()), fm::SweepResolution::Multiscale);
   const fm::DepthResult r = run(c, mask);
   EXPECT_EQ(cv::countNonZero(r.raw_depth.rowRange(100, 136) == r.raw_depth.rowRange(100, 136)), 0);
   // Rows just above the hood still get depth (the ground there is textured).
@@ -693,7 +697,7 @@ TEST_P(PlaneSweepBackends, SelfMaskedPixelsHaveNoDepth) {
 }
 
 TEST_P(PlaneSweepBackends, BlackSaturatedAndFullyMaskedViewsGiveNoDepthAndNoCrash) {
-  fm::PlaneSweep sweep(config(GetParam(), "multiscale"));
+  fm::PlaneSweep sweep(config(fm::parseSweepBackend(GetParam()), fm::SweepResolution::Multiscale));
   const Eigen::Isometry3d T_base_ref = rig_->cameras[0].T_base_cam;
   const fm::SweepView ref = fm::rigSweepView(*rig_, 0, 0, images_[0]);
   const cv::Mat black(images_[1].size(), CV_8UC1, cv::Scalar(0)), white(images_[1].size(), CV_8UC1, cv::Scalar(255));

@@ -3,8 +3,11 @@
 // sweep, ground-truth masking and TSDF fusion. Depth, masked depth, mesh and
 // cloud must arrive with the reference camera's stamps and frames, no frame set
 // may be dropped at this rate, and the final cloud must lie within 0.1 m of the
-// drive's static ground-truth scene for at least 85 % of its points.
+// drive's static ground-truth scene for at least 85 % of its points. The
+// masked depth the nodelet chain published must equal what offline_mapper (the
+// core FrameSetMapper) computes from the same bag and configuration.
 #include <gtest/gtest.h>
+#include <cv_bridge/cv_bridge.h>
 #include <pcl_conversions/pcl_conversions.h>
 #include <ros/ros.h>
 #include <sensor_msgs/Image.h>
@@ -14,8 +17,10 @@
 #include <pcl/point_cloud.h>
 #include <pcl/point_types.h>
 
+#include <cmath>
 #include <cstdlib>
 #include <functional>
+#include <map>
 #include <mutex>
 #include <set>
 #include <string>
@@ -23,6 +28,8 @@
 #include "fisheye_mapping/CameraFrameSet.h"
 #include "fisheye_mapping/core/eval/mesh_distance.h"
 #include "ros_test_utils.h"
+
+#include <opencv2/imgcodecs.hpp>
 
 namespace fm = fisheye_mapping;
 
@@ -45,6 +52,7 @@ TEST(VehicleEndToEnd, StagesStampsAndMapAccuracy) {
 
   std::mutex mu;
   std::set<uint64_t> frames, depth, masked;
+  std::map<uint64_t, cv::Mat> masked_depth;
   std::set<std::string> depth_frames, masked_frames, mesh_frames;
   sensor_msgs::PointCloud2ConstPtr cloud;
   int mesh_msgs = 0;
@@ -61,6 +69,7 @@ TEST(VehicleEndToEnd, StagesStampsAndMapAccuracy) {
     std::lock_guard<std::mutex> l(mu);
     masked.insert(m->header.stamp.toNSec());
     masked_frames.insert(m->header.frame_id);
+    masked_depth[m->header.stamp.toNSec()] = cv_bridge::toCvCopy(m)->image;
   });
   auto s4 = nh.subscribe<visualization_msgs::MarkerArray>("/mesh", 50, [&](const visualization_msgs::MarkerArrayConstPtr& m) {
     std::lock_guard<std::mutex> l(mu);
@@ -114,6 +123,41 @@ TEST(VehicleEndToEnd, StagesStampsAndMapAccuracy) {
   std::printf("end-to-end: %zu frame sets, %zu cloud points, %.1f %% within 0.1 m of the static scene\n",
               frames.size(), pts.size(), 100 * within);
   EXPECT_GE(within, 0.85);
+
+  // The same frame sets through offline_mapper (core FrameSetMapper) with the
+  // launch's configuration: the same masked depth, pixel for pixel.
+  const std::string offline = std::string(FM_OFFLINE_MAPPER) + " --bag " + dir + "/drive.bag --camchain " + config +
+                              "/default_camchain.yaml --mount " + config + "/default_mount.yaml --out " + dir +
+                              "/offline --config " FM_TEST_DATA_DIR "/vehicle_e2e.yaml --detector ground_truth" +
+                              " --frames 3 --quiet --save-depth " + dir + "/offline_depth >> " + dir + ".log 2>&1";
+  ASSERT_EQ(std::system(offline.c_str()), 0) << offline;
+  int compared = 0;
+  for (const auto& [stamp, topic_depth] : masked_depth) {
+    const cv::Mat mine = cv::imread(dir + "/offline_depth/" + std::to_string(stamp) + ".tiff", cv::IMREAD_UNCHANGED);
+    if (mine.empty()) continue;  // offline_mapper mapped the first 3 frame sets only
+    ++compared;
+    ASSERT_EQ(mine.type(), CV_32FC1);
+    ASSERT_EQ(mine.size(), topic_depth.size());
+    size_t same = 0, valid = 0;
+    double max_diff = 0;
+    for (int v = 0; v < mine.rows; ++v) {
+      for (int u = 0; u < mine.cols; ++u) {
+        const float a = mine.at<float>(v, u), b = topic_depth.at<float>(v, u);
+        if (std::isnan(a) || std::isnan(b)) {
+          same += std::isnan(a) && std::isnan(b);
+          continue;
+        }
+        ++valid, ++same;
+        max_diff = std::max(max_diff, double(std::fabs(a - b)));
+      }
+    }
+    std::printf("frame set %llu: offline_mapper vs nodelets: %zu of %d pixels agree (valid %zu), max |diff| %.2e m\n",
+                (unsigned long long)stamp, same, mine.rows * mine.cols, valid, max_diff);
+    EXPECT_EQ(same, size_t(mine.rows) * mine.cols) << "valid pixels differ at stamp " << stamp;
+    EXPECT_GT(valid, size_t(mine.rows) * mine.cols / 10);
+    EXPECT_LE(max_diff, 1e-4);
+  }
+  EXPECT_EQ(compared, 3);
   std::system(("rm -rf " + dir + " " + dir + ".log").c_str());
 }
 

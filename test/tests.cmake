@@ -49,7 +49,7 @@ fm_add_test(test_tsdf_lifecycle_node ROSTEST test/launch/tsdf_lifecycle.test
 fm_add_test(test_offline_mapper SOURCES test/test_offline_mapper.cpp DEPENDS offline_mapper make_drive)
 fm_add_test(test_multihost SOURCES test/test_multihost.cpp DEPENDS fisheye_mapping_nodelets make_drive)
 fm_add_test(test_vehicle_e2e_node ROSTEST test/launch/vehicle_e2e.test
-  SOURCES test/test_vehicle_e2e_node.cpp DEPENDS fisheye_mapping_nodelets make_drive paced_player)
+  SOURCES test/test_vehicle_e2e_node.cpp DEPENDS fisheye_mapping_nodelets make_drive paced_player offline_mapper)
 # Time going backwards and stage faults: a drive played twice through sync,
 # depth and masking; a depth manager killed and respawned mid-drive.
 fm_add_test(test_time_reset_node ROSTEST test/launch/time_reset.test
@@ -58,7 +58,7 @@ add_rostest(test/launch/depth_respawn.test DEPENDENCIES test_time_reset_node)
 
 # --- command-line tools ----------------------------------------------------
 # Option parsing (src/tools/cli.h), rejected inputs, and the regression inputs
-# of the fuzz targets (test/fuzz/<target>/, built with clang by scripts/fuzz)
+# of the fuzz targets (test/fuzz/<target>/, built with clang by scripts/checks/fuzz)
 # replayed through the same entry points with the normal build.
 fm_add_test(test_tool_options SOURCES test/test_tool_options.cpp INCLUDES ${PROJECT_SOURCE_DIR}/src/tools
   DEPENDS tsdf_benchmark depth_benchmark detector_benchmark detect_image)
@@ -76,3 +76,8 @@ foreach(fm_fuzz_pair ${FM_FUZZ_TARGETS})
 endforeach()
 fm_add_test(test_fuzz_regressions SOURCES test/test_fuzz_regressions.cpp ${FM_FUZZ_SOURCES}
   INCLUDES ${PROJECT_SOURCE_DIR}/src/tools DEFINES FM_FUZZ_DIR="${PROJECT_SOURCE_DIR}/test/fuzz")
+fm_add_test(test_reconfigure_params SOURCES test/test_reconfigure_params.cpp LIBS fisheye_mapping_ros DEPENDS fisheye_mapping_gencfg)
+fm_add_test(test_rig_geometry SOURCES test/test_rig_geometry.cpp)
+fm_add_test(test_frame_set_mapper SOURCES test/test_frame_set_mapper.cpp)
+fm_add_test(test_conversions SOURCES test/test_conversions.cpp LIBS fisheye_mapping_ros)
+fm_add_test(test_params SOURCES test/test_params.cpp)

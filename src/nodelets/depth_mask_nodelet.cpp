@@ -31,23 +31,21 @@
 #include <memory>
 #include <mutex>
 
-#include <cv_bridge/cv_bridge.h>
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/ros.h>
 #include <sensor_msgs/Image.h>
-#include <sensor_msgs/image_encodings.h>
 
 #include "fisheye_mapping/Detection2DArray.h"
 #include "fisheye_mapping/core/depth/depth_image.h"
 #include "fisheye_mapping/core/detection/depth_mask.h"
 #include "fisheye_mapping/core/sync/frame_sync.h"
+#include "fisheye_mapping/ros/conversions.h"
+#include "fisheye_mapping/ros/ros_params.h"
 #include "fisheye_mapping/ros/stage_health.h"
 
 namespace fisheye_mapping {
-
-namespace enc = sensor_msgs::image_encodings;
 
 class DepthMaskNodelet : public nodelet::Nodelet {
  private:
@@ -56,23 +54,20 @@ class DepthMaskNodelet : public nodelet::Nodelet {
   void onInit() override {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
-    double wait = 0.5;
-    int max_pending = 30;
-    pnh.param("margin_px", margin_px_, 10.0);
-    pnh.param("wait_for_detections", wait, wait);
-    pnh.param("max_pending", max_pending, max_pending);
-    if (!(margin_px_ >= 0)) {
-      NODELET_ERROR("~margin_px %.1f is negative; using 0", margin_px_);
-      margin_px_ = 0;
+    // Every masking parameter is declared once, in the core (DepthMaskConfig).
+    DepthMaskConfig cfg;
+    try {
+      cfg = DepthMaskConfig::fromParams(RosParams(pnh));
+    } catch (const std::exception& e) {
+      health_.error(std::string("parameters rejected, defaults used: ") + e.what());
+      NODELET_ERROR("depth mask parameters rejected, using the defaults: %s", e.what());
     }
-    if (!(wait >= 0)) {
-      NODELET_ERROR("~wait_for_detections %.3f is negative; using 0", wait);
-      wait = 0;
-    }
-    double time_reset = 1.0;
-    pnh.param("time_reset_threshold", time_reset, time_reset);
+    const double wait = cfg.wait_for_detections;
+    const double time_reset = cfg.time_reset_threshold;
+    margin_px_ = cfg.margin_px;
+    colour_near_ = cfg.colour_near, colour_far_ = cfg.colour_far;
     wait_ = wait;
-    max_pending_ = std::size_t(std::max(1, max_pending));
+    max_pending_ = std::size_t(cfg.max_pending);
     pairer_ = std::make_unique<Pairer>(wait_, max_pending_);
     timeline_ = std::make_unique<StreamTimeline>(2, time_reset);
     diag_ = std::make_unique<diagnostic_updater::Updater>(nh, pnh, getName());
@@ -89,10 +84,6 @@ class DepthMaskNodelet : public nodelet::Nodelet {
     masked_pub_ = nh.advertise<sensor_msgs::Image>("depth_masked", 5, connect, connect);
     mask_pub_ = nh.advertise<sensor_msgs::Image>("depth_mask", 5, connect, connect);
     colour_pub_ = nh.advertise<sensor_msgs::Image>("depth_masked_colour", 2, connect, connect);
-    std::vector<double> range;
-    if (pnh.getParam("colour_range", range) && range.size() == 2 && range[0] > 0 && range[1] > range[0]) {
-      colour_near_ = range[0], colour_far_ = range[1];
-    }
     timer_ = nh.createWallTimer(ros::WallDuration(std::max(0.005, std::min(0.05, wait / 4))),
                                 [this](const ros::WallTimerEvent&) { onTimer(); });
     NODELET_INFO("depth mask: margin %.1f px, waits %.3f s for detections", margin_px_, wait);
@@ -165,11 +156,11 @@ class DepthMaskNodelet : public nodelet::Nodelet {
 
   void onDepth(const sensor_msgs::ImageConstPtr& msg) {
     ++depth_in_;
-    if (msg->encoding != enc::TYPE_32FC1) {
-      health_.error("depth at " + formatStamp(std::int64_t(msg->header.stamp.toNSec())) + ": encoding '" +
-                    msg->encoding + "', expected 32FC1");
-      NODELET_ERROR_THROTTLE(1.0, "depth at %.3f skipped: encoding '%s', expected 32FC1 (range along the ray)",
-                             msg->header.stamp.toSec(), msg->encoding.c_str());
+    try {
+      checkDepthImage(*msg, getNodeHandle().resolveName("depth"));
+    } catch (const ImageConversionError& e) {
+      health_.error("depth at " + formatStamp(std::int64_t(msg->header.stamp.toNSec())) + ": " + e.what());
+      NODELET_ERROR_THROTTLE(1.0, "depth at %.3f skipped: %s", msg->header.stamp.toSec(), e.what());
       return;
     }
     std::lock_guard<std::mutex> lock(mutex_);
@@ -221,17 +212,13 @@ class DepthMaskNodelet : public nodelet::Nodelet {
   void publish(const std::vector<Pairer::Pair>& pairs) {
     for (const auto& p : pairs) {
       try {
-        cv::Mat depth = cv_bridge::toCvCopy(p.depth)->image;
+        cv::Mat depth = toDepth(*p.depth);
         std::vector<Detection> boxes;
         int w = depth.cols, h = depth.rows;
         if (p.dets) {
-          const auto& d = **p.dets;
-          if (d.image_width > 0 && d.image_height > 0) w = int(d.image_width), h = int(d.image_height);
-          for (const auto& m : d.detections) {
-            Detection b;
-            b.x_min = m.x_min, b.y_min = m.y_min, b.x_max = m.x_max, b.y_max = m.y_max;
-            boxes.push_back(b);
-          }
+          StampedDetections d = fromDetectionArrayMsg(**p.dets);
+          if (d.image_width > 0 && d.image_height > 0) w = d.image_width, h = d.image_height;
+          boxes = std::move(d.detections);
         } else {
           NODELET_WARN_THROTTLE(5.0, "no detections for depth at %.3f within the wait; passed through unmasked "
                                 "(%lu so far)", p.depth->header.stamp.toSec(),
@@ -239,11 +226,10 @@ class DepthMaskNodelet : public nodelet::Nodelet {
         }
         const cv::Mat mask = maskDepthBoxes(depth, boxes, float(margin_px_), w, h);
         ++masked_out_;
-        masked_pub_.publish(cv_bridge::CvImage(p.depth->header, enc::TYPE_32FC1, depth).toImageMsg());
-        mask_pub_.publish(cv_bridge::CvImage(p.depth->header, enc::MONO8, mask).toImageMsg());
+        masked_pub_.publish(toDepthMsg(p.depth->header, depth));
+        mask_pub_.publish(toImageMsg(p.depth->header, mask));  // mono8
         if (colour_pub_.getNumSubscribers() > 0)
-          colour_pub_.publish(
-              cv_bridge::CvImage(p.depth->header, enc::BGR8, colorizeDepth(depth, colour_near_, colour_far_)).toImageMsg());
+          colour_pub_.publish(toImageMsg(p.depth->header, colorizeDepth(depth, colour_near_, colour_far_)));  // bgr8
       } catch (const std::exception& e) {
         health_.error("depth at " + formatStamp(std::int64_t(p.depth->header.stamp.toNSec())) + ": " + e.what());
         NODELET_ERROR_THROTTLE(1.0, "depth at %.3f skipped: %s", p.depth->header.stamp.toSec(), e.what());

@@ -1,7 +1,8 @@
 // Object detector nodelet: the core Detector (cv::dnn, YOLO family / NanoDet)
 // on one camera's images.
 //
-// Subscribes  image (sensor_msgs/Image mono8 / bgr8 / rgb8 / bgra8 / rgba8,
+// Subscribes  image (sensor_msgs/Image: a camera-image encoding of
+//             ros/conversions.h, e.g. mono8 / bgr8 / rgb8 / bgra8 / rgba8,
 //             through image_transport; ~image_transport selects the transport),
 //             only while someone listens to an output (lazy).
 // Publishes   detections       (fisheye_mapping/Detection2DArray) stamped with the
@@ -23,41 +24,33 @@
 
 #include <atomic>
 
-#include <cv_bridge/cv_bridge.h>
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <image_transport/image_transport.h>
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
-#include <sensor_msgs/image_encodings.h>
 
 #include "fisheye_mapping/Detection2DArray.h"
 #include "fisheye_mapping/core/detection/detector.h"
 #include "fisheye_mapping/core/sync/frame_sync.h"
+#include "fisheye_mapping/ros/conversions.h"
+#include "fisheye_mapping/ros/ros_params.h"
 #include "fisheye_mapping/ros/stage_health.h"
 
 namespace fisheye_mapping {
-
-namespace enc = sensor_msgs::image_encodings;
 
 class DetectorNodelet : public nodelet::Nodelet {
  private:
   void onInit() override {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
-    pnh.param("only_moving", only_moving_, true);
-    pnh.param("publish_annotated", publish_annotated_, true);
     pnh.param<std::string>("image_transport", transport_, "raw");
-    std::string model_config;
-    DnnDevice device;
-    pnh.param<std::string>("dnn_backend", device.backend, device.backend);
-    pnh.param<std::string>("dnn_target", device.target, device.target);
     try {
-      if (!pnh.getParam("model_config", model_config))
-        throw std::runtime_error("~model_config (path of a model YAML, see config/detector/) is not set");
-      DetectorConfig cfg = loadDetectorConfig(model_config);
-      double v;
-      if (pnh.getParam("score_threshold", v)) cfg.score_threshold = float(v);
-      if (pnh.getParam("nms_threshold", v)) cfg.nms_threshold = float(v);
+      // Every detector parameter is declared once, in the core (DetectorStageConfig).
+      const DetectorStageConfig stage = DetectorStageConfig::fromParams(RosParams(pnh));
+      only_moving_ = stage.only_moving;
+      publish_annotated_ = stage.publish_annotated;
+      const DetectorConfig cfg = stage.loadModel();
+      const DnnDevice device = stage.device();
       detector_ = std::make_unique<Detector>(cfg, device);
       NODELET_INFO("detector: %s head, %dx%d input, %zu classes, backend %s target %s, model %s",
                    headName(cfg.head), cfg.input_width, cfg.input_height, cfg.class_names.size(),
@@ -124,37 +117,15 @@ class DetectorNodelet : public nodelet::Nodelet {
       return;
     }
     try {
-      const std::string& e = msg->encoding;
-      cv::Mat image;
-      if (e == enc::MONO8 || e == enc::BGR8 || e == enc::BGRA8) {
-        image = cv_bridge::toCvShare(msg)->image;
-      } else if (e == enc::RGB8 || e == enc::RGBA8) {
-        image = cv_bridge::toCvShare(msg, enc::BGR8)->image;
-      } else {
-        throw std::invalid_argument("unsupported encoding '" + e + "' (mono8, bgr8, rgb8, bgra8 or rgba8)");
-      }
+      const cv::Mat image = toCvImageShare(msg, ImageTarget::kDetector, getNodeHandle().resolveName("image"));
       const ros::WallTime t0 = ros::WallTime::now();
       const std::vector<Detection> dets = detector_->detect(image, only_moving_);
       NODELET_DEBUG("%zu detections in %.1f ms", dets.size(), (ros::WallTime::now() - t0).toSec() * 1e3);
-      Detection2DArray out;
-      out.header = msg->header;  // the image's stamp and frame
-      out.image_width = image.cols;
-      out.image_height = image.rows;
-      for (const auto& d : dets) {
-        Detection2D m;
-        m.x_min = d.x_min;
-        m.y_min = d.y_min;
-        m.x_max = d.x_max;
-        m.y_max = d.y_max;
-        m.class_id = d.class_id;
-        m.class_name = d.class_name;
-        m.score = d.score;
-        out.detections.push_back(m);
-      }
-      det_pub_.publish(out);
+      // Stamped with the image's stamp and frame.
+      det_pub_.publish(toDetectionArrayMsg(msg->header, image.cols, image.rows, dets));
       ++sets_out_;
       if (publish_annotated_ && image_pub_.getNumSubscribers() > 0)
-        image_pub_.publish(cv_bridge::CvImage(msg->header, enc::BGR8, annotateDetections(image, dets)).toImageMsg());
+        image_pub_.publish(toImageMsg(msg->header, annotateDetections(image, dets)));
     } catch (const std::exception& ex) {
       health_.error("image at " + formatStamp(std::int64_t(msg->header.stamp.toNSec())) + ": " + ex.what());
       NODELET_ERROR_THROTTLE(1.0, "image at %.3f (%ux%u) skipped: %s", msg->header.stamp.toSec(), msg->width,

@@ -19,7 +19,8 @@
 // the sync (core FrameSetSync), with a warning naming both stamps.
 // Any number of cameras (message_filters' Synchronizer stops at 9): the
 // grouping is the core FrameSetSync. Images whose size differs from the
-// calibration or whose encoding is not an 8-bit image are reported and dropped.
+// calibration, malformed images and images in an encoding that is not a
+// camera-image encoding of ros/conversions.h are reported and dropped.
 #include <memory>
 #include <mutex>
 
@@ -28,35 +29,29 @@
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/ros.h>
-#include <sensor_msgs/image_encodings.h>
 
 #include "fisheye_mapping/CameraFrameSet.h"
 #include "fisheye_mapping/core/sync/frame_sync.h"
+#include "fisheye_mapping/ros/conversions.h"
 #include "fisheye_mapping/ros/ros_params.h"
 #include "fisheye_mapping/ros/stage_health.h"
 
 namespace fisheye_mapping {
-
-namespace enc = sensor_msgs::image_encodings;
 
 class FrameSyncNodelet : public nodelet::Nodelet {
  private:
   void onInit() override {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
-    std::string policy = "exact";
-    double max_interval = 0.005;
-    int queue = 10;
-    pnh.param("policy", policy, policy);
-    pnh.param("max_interval", max_interval, max_interval);
-    pnh.param("queue_size", queue, queue);
-    pnh.param("silent_warning", silent_s_, 2.0);
-    double time_reset = 1.0;
-    pnh.param("time_reset_threshold", time_reset, time_reset);
     pnh.param<std::string>("image_transport", transport_, "raw");
     try {
+      // Every sync parameter is declared once, in the core (FrameSyncConfig).
+      cfg_ = FrameSyncConfig::fromParams(RosParams(pnh));
+      const FrameSyncConfig& cfg = cfg_;
+      silent_s_ = cfg.silent_warning;
       rig_ = loadRigFromParams(pnh);
-      if (!pnh.getParam("image_topics", topics_)) {
+      topics_ = cfg.image_topics;
+      if (topics_.empty()) {
         for (const auto& c : rig_.cameras) {
           if (c.rostopic.empty()) throw CalibrationError("camera " + c.name + " has no rostopic in the camchain; set ~image_topics");
           topics_.push_back(c.rostopic);
@@ -65,9 +60,8 @@ class FrameSyncNodelet : public nodelet::Nodelet {
       if (topics_.size() != rig_.cameras.size())
         throw CalibrationError("~image_topics has " + std::to_string(topics_.size()) + " topics for " +
                                std::to_string(rig_.cameras.size()) + " cameras");
-      sync_ = std::make_unique<FrameSetSync<sensor_msgs::ImageConstPtr>>(int(topics_.size()), parseSyncPolicy(policy),
-                                                                         max_interval, std::size_t(std::max(1, queue)),
-                                                                         time_reset);
+      sync_ = std::make_unique<FrameSetSync<sensor_msgs::ImageConstPtr>>(
+          int(topics_.size()), cfg.policy, cfg.max_interval, std::size_t(cfg.queue_size), cfg.time_reset_threshold);
     } catch (const std::exception& e) {
       NODELET_FATAL("frame sync not started: %s", e.what());
       return;
@@ -90,8 +84,8 @@ class FrameSyncNodelet : public nodelet::Nodelet {
     clock_timer_ = nh.createWallTimer(ros::WallDuration(0.2), [this](const ros::WallTimerEvent&) { checkClock(); });
     std::string list;
     for (const auto& t : topics_) list += " " + t;
-    NODELET_INFO("frame sync: %zu cameras (%s policy, max interval %.4f s):%s", topics_.size(), policy.c_str(),
-                 max_interval, list.c_str());
+    NODELET_INFO("frame sync: %zu cameras (%s policy, max interval %.4f s):%s", topics_.size(),
+                 toString(cfg_.policy).c_str(), cfg_.max_interval, list.c_str());
   }
 
   void updateSubscription() {
@@ -167,13 +161,18 @@ class FrameSyncNodelet : public nodelet::Nodelet {
     c.received++;
     c.last_arrival = ros::Time::now();
     const auto& model = rig_.cameras[cam].model;
-    const bool ok_enc = msg->encoding == enc::MONO8 || msg->encoding == enc::BGR8 || msg->encoding == enc::RGB8 ||
-                        msg->encoding == enc::BGRA8 || msg->encoding == enc::RGBA8;
-    if (!ok_enc || int(msg->width) != model.width() || int(msg->height) != model.height()) {
+    try {
+      checkCameraImage(*msg, topics_[cam]);
+    } catch (const ImageConversionError& e) {
       ++c.bad;
-      NODELET_ERROR_THROTTLE(2.0, "%s (%s): image %ux%u %s dropped: the calibration says %dx%d and an 8-bit image "
-                             "(mono8, bgr8, rgb8, bgra8, rgba8)", rig_.cameras[cam].name.c_str(), topics_[cam].c_str(),
-                             msg->width, msg->height, msg->encoding.c_str(), model.width(), model.height());
+      NODELET_ERROR_THROTTLE(2.0, "%s: %s; dropped", rig_.cameras[cam].name.c_str(), e.what());
+      return;
+    }
+    if (int(msg->width) != model.width() || int(msg->height) != model.height()) {
+      ++c.bad;
+      NODELET_ERROR_THROTTLE(2.0, "%s (%s): image %ux%u %s dropped: the calibration says %dx%d",
+                             rig_.cameras[cam].name.c_str(), topics_[cam].c_str(), msg->width, msg->height,
+                             msg->encoding.c_str(), model.width(), model.height());
       return;
     }
     auto sets = sync_->add(cam, std::int64_t(msg->header.stamp.toNSec()), msg);
@@ -240,6 +239,7 @@ class FrameSyncNodelet : public nodelet::Nodelet {
     std::uint64_t received = 0, last_received = 0, bad = 0;
     ros::Time last_arrival;
   };
+  FrameSyncConfig cfg_;
   Rig rig_;
   std::vector<std::string> topics_;
   std::string transport_;

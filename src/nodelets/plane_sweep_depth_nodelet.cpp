@@ -24,25 +24,23 @@
 #include <memory>
 #include <mutex>
 
-#include <cv_bridge/cv_bridge.h>
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <dynamic_reconfigure/server.h>
 #include <nodelet/nodelet.h>
 #include <opencv2/imgcodecs.hpp>
 #include <pluginlib/class_list_macros.hpp>
 #include <sensor_msgs/Image.h>
-#include <sensor_msgs/image_encodings.h>
 
 #include "fisheye_mapping/CameraFrameSet.h"
 #include "fisheye_mapping/PlaneSweepFiltersConfig.h"
+#include "fisheye_mapping/core/depth/depth_stage.h"
 #include "fisheye_mapping/core/depth/plane_sweep.h"
 #include "fisheye_mapping/core/sync/frame_sync.h"
+#include "fisheye_mapping/ros/conversions.h"
 #include "fisheye_mapping/ros/ros_params.h"
 #include "fisheye_mapping/ros/stage_health.h"
 
 namespace fisheye_mapping {
-
-namespace enc = sensor_msgs::image_encodings;
 
 class PlaneSweepDepthNodelet : public nodelet::Nodelet {
  private:
@@ -50,35 +48,14 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
     try {
-      rig_ = loadRigFromParams(pnh);
-      const PlaneSweepConfig config = loadPlaneSweepConfig(pnh);
-      std::string ref_name = "cam0";
-      pnh.param("reference_camera", ref_name, ref_name);
-      ref_ = rig_.indexOf(ref_name);
-      if (ref_ < 0) throw CalibrationError("~reference_camera: no camera '" + ref_name + "' in the rig");
-      std::vector<std::string> support_names;
-      if (!pnh.getParam("support_cameras", support_names)) {
-        for (const auto& c : rig_.cameras) {
-          if (c.name != ref_name) support_names.push_back(c.name);
-        }
-      }
-      for (const auto& n : support_names) {
-        const int i = rig_.indexOf(n);
-        if (i < 0 || i == ref_) throw CalibrationError("~support_cameras: '" + n + "' is not a supporting camera of the rig");
-        supports_.push_back(i);
-      }
-      std::map<std::string, std::string> masks;
-      pnh.getParam("self_masks", masks);
-      masks_.resize(rig_.cameras.size());
-      for (const auto& [name, path] : masks) {
-        const int i = rig_.indexOf(name);
-        if (i < 0) throw CalibrationError("~self_masks: no camera '" + name + "' in the rig");
-        masks_[i] = cv::imread(path, cv::IMREAD_GRAYSCALE);
-        if (masks_[i].empty()) throw CalibrationError("~self_masks: cannot read " + path);
-      }
-      sweep_ = std::make_unique<PlaneSweep>(config);
-      NODELET_INFO("plane sweep on %s, reference %s, %zu supporting camera(s), %s",
-                   sweep_->backendName().c_str(), ref_name.c_str(), supports_.size(), config.resolution.c_str());
+      // The depth stage's parameters are declared once, in the core
+      // (DepthStageConfig, PlaneSweepConfig): the offline FrameSetMapper reads
+      // the same names into the same stage object.
+      const DepthStageConfig config = DepthStageConfig::fromParams(RosParams(pnh));
+      stage_ = std::make_unique<DepthStage>(loadRigFromParams(pnh), config);
+      NODELET_INFO("plane sweep on %s, reference %s, %zu supporting camera(s), %s", stage_->backendName().c_str(),
+                   config.reference_camera.c_str(), stage_->supports().size(),
+                   toString(config.sweep.resolution).c_str());
     } catch (const std::exception& e) {
       NODELET_FATAL("plane sweep depth not started: %s", e.what());
       return;
@@ -88,7 +65,7 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
     pnh.param("time_reset_threshold", time_reset, time_reset);
     timeline_ = std::make_unique<StreamTimeline>(1, time_reset);
     diag_ = std::make_unique<diagnostic_updater::Updater>(nh, pnh, getName());
-    diag_->setHardwareID("plane sweep (" + sweep_->backendName() + ")");
+    diag_->setHardwareID("plane sweep (" + stage_->backendName() + ")");
     diag_->add("depth", this, &PlaneSweepDepthNodelet::diagnose);
     diag_timer_ = nh.createWallTimer(ros::WallDuration(1.0), [this](const ros::WallTimerEvent&) {
       try {
@@ -107,25 +84,16 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
     if (publish_uniqueness_) uniqueness_pub_ = nh.advertise<sensor_msgs::Image>("uniqueness", 2, connect, connect);
   }
 
+  // The filter names are the core's (DepthFilterConfig::fromParams, checked
+  // against cfg/PlaneSweepFilters.cfg by test_reconfigure_params).
   void onReconfigure(PlaneSweepFiltersConfig& c) {
-    DepthFilterConfig f;
-    f.texture = c.filter_texture;
-    f.min_texture_snr = c.min_texture_snr;
-    f.cost = c.filter_cost;
-    f.alpha_upper = c.alpha_upper;
-    f.alpha_lower = c.alpha_lower;
-    f.split_row = c.split_row;
-    f.uniqueness = c.filter_uniqueness;
-    f.max_ratio = c.max_ratio;
-    f.consistency = c.filter_consistency;
     c.consistency_window |= 1;  // odd windows only
-    f.consistency_window = c.consistency_window;
-    f.gamma = c.gamma;
-    f.delta = c.delta;
+    dynamic_reconfigure::Config values;
+    c.__toMessage__(values);
     std::lock_guard<std::mutex> lock(mutex_);
-    f.min_noise_std = sweep_->config().filters.min_noise_std;  // not reconfigurable
     try {
-      sweep_->setFilters(f);
+      // Over the running filters: what the .cfg does not hold (min_noise_std) stays.
+      stage_->setFilters(DepthFilterConfig::fromParams(ReconfigureParams(values), stage_->sweepConfig().filters));
     } catch (const std::exception& e) {
       health_.error(std::string("filter parameters rejected: ") + e.what());
       NODELET_ERROR("filter parameters rejected: %s", e.what());
@@ -150,16 +118,6 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
     } else if (!wanted && sub_) {
       sub_.shutdown();
     }
-  }
-
-  // Grey or colour image as the core takes it; throws naming the problem.
-  static cv::Mat toCv(const sensor_msgs::ImageConstPtr& msg, const std::string& name) {
-    const std::string& e = msg->encoding;
-    if (e == enc::MONO8 || e == enc::MONO16 || e == enc::TYPE_32FC1) return cv_bridge::toCvShare(msg)->image;
-    if (e == enc::BGR8 || e == enc::RGB8 || e == enc::BGRA8 || e == enc::RGBA8) {
-      return cv_bridge::toCvShare(msg, enc::BGR8)->image;
-    }
-    throw std::invalid_argument(name + ": unsupported encoding '" + e + "' (mono8, mono16, 32FC1 or 8-bit colour)");
   }
 
   void checkClock() {
@@ -187,7 +145,7 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
 
   void onFrames(const CameraFrameSetConstPtr& set) {
     std::lock_guard<std::mutex> lock(mutex_);
-    if (!sweep_) return;
+    if (!stage_) return;
     ++frames_in_;
     {
       std::lock_guard<std::mutex> tl(time_mutex_);
@@ -201,33 +159,31 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
       }
       auto find = [&](int cam) -> sensor_msgs::ImageConstPtr {
         for (size_t i = 0; i < set->camera_names.size(); ++i) {
-          if (set->camera_names[i] == rig_.cameras[cam].name) {
+          if (set->camera_names[i] == stage_->rig().cameras[cam].name) {
             return sensor_msgs::ImageConstPtr(set, &set->images[i]);  // aliases the set's lifetime
           }
         }
         return nullptr;
       };
-      const sensor_msgs::ImageConstPtr ref_img = find(ref_);
-      if (!ref_img) throw std::invalid_argument("frame set has no image of the reference camera " + rig_.cameras[ref_].name);
-      const SweepView ref = rigSweepView(rig_, ref_, ref_, toCv(ref_img, rig_.cameras[ref_].name), masks_[ref_]);
-      std::vector<SweepView> views;
-      for (int i : supports_) {
-        const sensor_msgs::ImageConstPtr img = find(i);
-        if (!img) {
-          NODELET_WARN_THROTTLE(5.0, "frame set has no image of %s; sweeping without it", rig_.cameras[i].name.c_str());
-          continue;
+      const Rig& rig = stage_->rig();
+      const int ref = stage_->reference();
+      const sensor_msgs::ImageConstPtr ref_img = find(ref);
+      if (!ref_img) throw std::invalid_argument("frame set has no image of the reference camera " + rig.cameras[ref].name);
+      std::vector<cv::Mat> images(rig.cameras.size());  // empty: not in the set (DepthStage names it)
+      images[ref] = toCvImageShare(ref_img, ImageTarget::kSweep, rig.cameras[ref].name);
+      for (int i : stage_->supports()) {
+        if (const sensor_msgs::ImageConstPtr img = find(i)) {
+          images[i] = toCvImageShare(img, ImageTarget::kSweep, rig.cameras[i].name);
         }
-        views.push_back(rigSweepView(rig_, i, ref_, toCv(img, rig_.cameras[i].name), masks_[i]));
       }
-      const Eigen::Isometry3d T_base_ref = rig_.cameras[ref_].T_base_cam;
-      const DepthResult r = sweep_->compute(ref, views, &T_base_ref);
+      const DepthResult r = stage_->compute(images);
       if (!r.dropped_views.empty()) NODELET_INFO_ONCE("supporting view dropped: %s", r.dropped_views.front().c_str());
       for (const auto& w : r.warnings) NODELET_WARN_THROTTLE(10.0, "frame %.3f: %s", ref_img->header.stamp.toSec(), w.c_str());
       std_msgs::Header header = ref_img->header;
-      if (header.frame_id.empty()) header.frame_id = rig_.cameras[ref_].frame_id;
-      depth_pub_.publish(cv_bridge::CvImage(header, enc::TYPE_32FC1, r.depth).toImageMsg());
-      cost_pub_.publish(cv_bridge::CvImage(header, enc::TYPE_32FC1, r.cost).toImageMsg());
-      if (publish_uniqueness_) uniqueness_pub_.publish(cv_bridge::CvImage(header, enc::TYPE_32FC1, r.uniqueness).toImageMsg());
+      if (header.frame_id.empty()) header.frame_id = rig.cameras[ref].frame_id;
+      depth_pub_.publish(toDepthMsg(header, r.depth));
+      cost_pub_.publish(toImageMsg(header, r.cost));  // 32FC1
+      if (publish_uniqueness_) uniqueness_pub_.publish(toImageMsg(header, r.uniqueness));
       NODELET_DEBUG("depth in %.1f ms (sweep %.1f, filters %.1f)", r.total_ms, r.sweep_ms, r.filter_ms);
       total_ms_ = total_ms_ + r.total_ms;
       ++depth_out_;
@@ -242,11 +198,7 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
     }
   }
 
-  Rig rig_;
-  int ref_ = 0;
-  std::vector<int> supports_;
-  std::vector<cv::Mat> masks_;
-  std::unique_ptr<PlaneSweep> sweep_;
+  std::unique_ptr<DepthStage> stage_;
   bool publish_uniqueness_ = false;
   std::mutex mutex_, connect_mutex_;
   boost::recursive_mutex reconfigure_mutex_;

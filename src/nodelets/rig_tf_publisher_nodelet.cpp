@@ -12,9 +12,9 @@
 #include <geometry_msgs/TransformStamped.h>
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
-#include <tf2_eigen/tf2_eigen.h>
 #include <tf2_ros/static_transform_broadcaster.h>
 
+#include "fisheye_mapping/ros/conversions.h"
 #include "fisheye_mapping/ros/ros_params.h"
 #include "fisheye_mapping/ros/stage_health.h"
 
@@ -58,11 +58,7 @@ class RigTfPublisherNodelet : public nodelet::Nodelet {
     std::vector<geometry_msgs::TransformStamped> transforms;
     const ros::Time stamp = ros::Time::now();
     for (const RigCamera& cam : rig.cameras) {
-      geometry_msgs::TransformStamped t = tf2::eigenToTransform(cam.T_base_cam);
-      t.header.stamp = stamp;
-      t.header.frame_id = rig.base_frame;
-      t.child_frame_id = cam.frame_id;
-      transforms.push_back(t);
+      transforms.push_back(toTransformMsg(cam.T_base_cam, rig.base_frame, cam.frame_id, stamp));
     }
     broadcaster_ = std::make_unique<tf2_ros::StaticTransformBroadcaster>();
     broadcaster_->sendTransform(transforms);

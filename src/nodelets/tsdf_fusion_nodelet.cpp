@@ -8,7 +8,7 @@
 //             /diagnostics (frames, errors caught, lost swap blocks, saves)
 // Services    ~save_mesh, ~save_cloud, ~save_map, ~load_map (FilePath),
 //             ~clear_map (std_srvs/Trigger)
-// Parameters  see README ("TSDF fusion nodelet").
+// Parameters  see docs/nodelets.md ("fisheye_mapping/TsdfFusion").
 //
 // Nothing the user built is lost: every exception in a callback is caught,
 // logged with the frame stamp and counted (the stage goes on); SIGTERM saves
@@ -28,17 +28,13 @@
 #include <unordered_map>
 #include <unordered_set>
 
-#include <cv_bridge/cv_bridge.h>
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <message_filters/subscriber.h>
 #include <nodelet/nodelet.h>
-#include <pcl_conversions/pcl_conversions.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <sensor_msgs/Image.h>
 #include <sensor_msgs/PointCloud2.h>
-#include <sensor_msgs/image_encodings.h>
 #include <std_srvs/Trigger.h>
-#include <tf2_eigen/tf2_eigen.h>
 #include <tf2_ros/buffer.h>
 #include <tf2_ros/message_filter.h>
 #include <tf2_ros/transform_listener.h>
@@ -48,6 +44,7 @@
 #include "fisheye_mapping/FrameDone.h"
 #include "fisheye_mapping/core/tsdf/tsdf_map.h"
 #include "fisheye_mapping/core/tsdf/tsdf_mesher.h"
+#include "fisheye_mapping/ros/conversions.h"
 #include "fisheye_mapping/ros/ros_params.h"
 
 namespace fisheye_mapping {
@@ -447,10 +444,11 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
       NODELET_WARN_THROTTLE(5.0, "depth frame '%s' is not a camera of the rig; frame skipped", msg->header.frame_id.c_str());
       return;
     }
-    if (msg->encoding != sensor_msgs::image_encodings::TYPE_32FC1) {
-      skipped = "encoding '" + msg->encoding + "' is not 32FC1";
-      NODELET_WARN_THROTTLE(5.0, "depth must be 32FC1 (metres of range along the ray), got '%s'; frame skipped",
-                            msg->encoding.c_str());
+    try {
+      checkDepthImage(*msg, getNodeHandle().resolveName("depth"));
+    } catch (const ImageConversionError& e) {
+      skipped = e.what();
+      NODELET_WARN_THROTTLE(5.0, "%s; frame skipped", e.what());
       return;
     }
     {
@@ -470,24 +468,24 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     }
     Eigen::Isometry3d T_W_C, T_W_B;
     try {
-      T_W_C = tf2::transformToEigen(tf_buffer_->lookupTransform(world_frame_, msg->header.frame_id, msg->header.stamp));
-      T_W_B = tf2::transformToEigen(tf_buffer_->lookupTransform(world_frame_, base_frame_, msg->header.stamp));
+      T_W_C = toIsometry(tf_buffer_->lookupTransform(world_frame_, msg->header.frame_id, msg->header.stamp));
+      T_W_B = toIsometry(tf_buffer_->lookupTransform(world_frame_, base_frame_, msg->header.stamp));
     } catch (const tf2::TransformException& e) {
       skipped = std::string("no pose: ") + e.what();
       NODELET_WARN_THROTTLE(5.0, "no pose for the depth frame at %.3f: %s; frame skipped", msg->header.stamp.toSec(), e.what());
       return;
     }
-    cv_bridge::CvImageConstPtr depth;
+    cv::Mat depth;
     try {
-      depth = cv_bridge::toCvShare(msg);
-    } catch (const cv_bridge::Exception& e) {
+      depth = toDepthShare(msg);
+    } catch (const ImageConversionError& e) {
       skipped = std::string("unreadable depth image: ") + e.what();
       NODELET_WARN_THROTTLE(5.0, "cannot read the depth image: %s; frame skipped", e.what());
       return;
     }
     std::lock_guard<std::mutex> lock(mutex_);
     try {
-      const auto stats = map_->integrate(depth->image, rig_.cameras[cam_index].model, T_W_C, T_W_B.translation());
+      const auto stats = map_->integrate(depth, rig_.cameras[cam_index].model, T_W_C, T_W_B.translation());
       last_stamp_ = msg->header.stamp;
       ++frames_fused_;
       ++changes_;
@@ -519,10 +517,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     const ros::Time stamp = last_stamp_.isZero() ? ros::Time::now() : last_stamp_;
     visualization_msgs::MarkerArray markers;
     if (cleared_) {
-      visualization_msgs::Marker del;
-      del.header.frame_id = world_frame_;
-      del.action = visualization_msgs::Marker::DELETEALL;
-      markers.markers.push_back(del);
+      markers.markers.push_back(deleteAllMarker(world_frame_));
       cleared_ = false;
       marker_ids_.clear();
       shown_.clear();
@@ -542,27 +537,16 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
       markers.markers.push_back(std::move(m));
     }
     if (!markers.markers.empty()) mesh_pub_.publish(markers);
-    sensor_msgs::PointCloud2 cloud;
-    pcl::toROSMsg(mesher_->surfaceCloud(), cloud);
-    cloud.header.frame_id = world_frame_;
-    cloud.header.stamp = stamp;
-    cloud_pub_.publish(cloud);
+    cloud_pub_.publish(toCloudMsg(mesher_->surfaceCloud(), world_frame_, stamp));
   }
 
   visualization_msgs::MarkerArray fullMesh() {
     std::lock_guard<std::mutex> lock(mutex_);
-    visualization_msgs::MarkerArray markers;
-    if (!mesher_) return markers;
-    visualization_msgs::Marker del;
-    del.header.frame_id = world_frame_;
-    del.action = visualization_msgs::Marker::DELETEALL;
-    markers.markers.push_back(del);
+    if (!mesher_) return visualization_msgs::MarkerArray();
     const ros::Time stamp = last_stamp_.isZero() ? ros::Time::now() : last_stamp_;
-    for (const auto& kv : mesher_->blocks()) {
-      if (kv.second.triangles.empty()) continue;
-      markers.markers.push_back(blockMarker(kv.first, stamp));
-      shown_.insert(markers.markers.back().id);
-    }
+    visualization_msgs::MarkerArray markers = meshToMarkerArray(
+        mesher_->blocks(), world_frame_, stamp, [this](const BlockIndex& b) { return markerId(b); });
+    for (size_t i = 1; i < markers.markers.size(); ++i) shown_.insert(markers.markers[i].id);  // [0]: DELETEALL
     return markers;
   }
 
@@ -574,33 +558,10 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     return it->second;
   }
 
+  // The block's marker (ADD with its triangles, or DELETE when it has none).
   visualization_msgs::Marker blockMarker(const BlockIndex& b, const ros::Time& stamp) const {
-    visualization_msgs::Marker m;
-    m.header.frame_id = world_frame_;
-    m.header.stamp = stamp;
-    m.ns = "tsdf_mesh";
-    m.id = markerId(b);
-    m.pose.orientation.w = 1.0;
-    m.scale.x = m.scale.y = m.scale.z = 1.0;
     const auto it = mesher_->blocks().find(b);
-    if (it == mesher_->blocks().end() || it->second.triangles.empty()) {
-      m.action = visualization_msgs::Marker::DELETE;
-      return m;
-    }
-    m.type = visualization_msgs::Marker::TRIANGLE_LIST;
-    m.action = visualization_msgs::Marker::ADD;
-    m.color.a = 1.0;
-    for (const auto& v : it->second.triangles) {
-      geometry_msgs::Point p;
-      p.x = v.x(), p.y = v.y(), p.z = v.z();
-      m.points.push_back(p);
-      // Colour by height: 0 m dark grey-blue to 6 m light.
-      std_msgs::ColorRGBA c;
-      const float h = std::min(1.0f, std::max(0.0f, v.z() / 6.0f));
-      c.r = 0.3f + 0.6f * h, c.g = 0.35f + 0.5f * h, c.b = 0.5f + 0.3f * h, c.a = 1.0f;
-      m.colors.push_back(c);
-    }
-    return m;
+    return meshBlockMarker(it == mesher_->blocks().end() ? nullptr : &it->second, markerId(b), world_frame_, stamp);
   }
 
   std::string pathOr(const std::string& requested, const std::string& name) const {

@@ -202,8 +202,8 @@ int main(int argc, char** argv) {
       for (const std::string res : {"full", "half", "multiscale"}) {
         for (const bool filters : {false, true}) {
           fm::PlaneSweepConfig c;
-          c.backend = backend;
-          c.resolution = res;
+          c.backend = fm::parseSweepBackend(backend);
+          c.resolution = fm::parseSweepResolution(res);
           c.device = a.count("device") ? a["device"] : "";
           if (band_rows > 0) c.band_rows = band_rows;
           if (!filters) c.filters.cost = c.filters.uniqueness = c.filters.consistency = false;

@@ -161,12 +161,12 @@ int runSynthetic(const std::map<std::string, std::string>& a) {
   for (int i = 0; i < has_ray.rows * has_ray.cols; ++i) has_ray.data[i] = rays[0][i].allFinite() ? 1 : 0;
 
   fm::PlaneSweepConfig base;
-  base.backend = get(a, "backend", "auto");
+  base.backend = fm::parseSweepBackend(get(a, "backend", "auto"));
   base.device = get(a, "device", "-");
   if (base.device == "-") base.device.clear();
   fm::DepthFilterConfig none;
   none.cost = none.uniqueness = none.consistency = false;
-  auto configured = [&](const std::string& resolution, const fm::DepthFilterConfig& f) {
+  auto configured = [&](fm::SweepResolution resolution, const fm::DepthFilterConfig& f) {
     fm::PlaneSweepConfig c = base;
     c.resolution = resolution;
     c.filters = f;
@@ -175,9 +175,10 @@ int runSynthetic(const std::map<std::string, std::string>& a) {
   fm::DepthFilterConfig vehicle_filters = base.filters, no_texture = base.filters;
   vehicle_filters.uniqueness = false;  // as config/vehicle.yaml
   no_texture.texture = false;
-  fm::PlaneSweep full(configured("full", none)), half(configured("half", none)),
-      multi(configured("multiscale", none)), filtered(configured("multiscale", base.filters)),
-      vehicle(configured("multiscale", vehicle_filters)), untextured(configured("multiscale", no_texture));
+  using Res = fm::SweepResolution;
+  fm::PlaneSweep full(configured(Res::Full, none)), half(configured(Res::Half, none)),
+      multi(configured(Res::Multiscale, none)), filtered(configured(Res::Multiscale, base.filters)),
+      vehicle(configured(Res::Multiscale, vehicle_filters)), untextured(configured(Res::Multiscale, no_texture));
   std::vector<RealFigures> paper_figs, vehicle_figs;
   std::vector<double> ms_texture, ms_no_texture;
   std::cerr << "depth_eval: backend " << multi.backendName() << "\n";
@@ -518,7 +519,7 @@ int runVcharge(const std::map<std::string, std::string>& a) {
   config.near = 0.4;  // PlaneSweepLib's reference run: 0.4 m (the camera looks down at the road)
   config.far = 100.0;
   config.min_parallax_px = 0.0;  // ~0.2 m between frames: small but all we have
-  config.aggregation = "best_k";  // frames before and after: one of them sees occluded points
+  config.aggregation = fm::SweepAggregation::BestK;  // frames before and after: one of them sees occluded points
   fm::PlaneSweep sweep(config);
   auto depthAt = [&](int ref) {
     fm::SweepView rv{names[ref], rig.cameras[0].model, Eigen::Isometry3d::Identity(), images[ref], cv::Mat()};

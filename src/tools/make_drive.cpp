@@ -22,16 +22,15 @@
 #include <random>
 #include <string>
 
-#include <cv_bridge/cv_bridge.h>
 #include <geometry_msgs/TransformStamped.h>
 #include <rosbag/bag.h>
-#include <tf2_eigen/tf2_eigen.h>
 #include <tf2_msgs/TFMessage.h>
 
 #include "cli.h"
 #include "fisheye_mapping/Detection2DArray.h"
 #include "fisheye_mapping/core/camera/rig.h"
 #include "fisheye_mapping/core/sim/synthetic_world.h"
+#include "fisheye_mapping/ros/conversions.h"
 
 namespace fm = fisheye_mapping;
 
@@ -191,15 +190,6 @@ Options parse(int argc, char** argv) {
   return o;
 }
 
-geometry_msgs::TransformStamped toMsg(const Eigen::Isometry3d& T, const std::string& parent, const std::string& child,
-                                      const ros::Time& stamp) {
-  geometry_msgs::TransformStamped t = tf2::eigenToTransform(T);
-  t.header.frame_id = parent;
-  t.child_frame_id = child;
-  t.header.stamp = stamp;
-  return t;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -263,7 +253,7 @@ int main(int argc, char** argv) {
 
     // Static mounts, latched like a live /tf_static.
     tf2_msgs::TFMessage statics;
-    for (const auto& cam : given.cameras) statics.transforms.push_back(toMsg(cam.T_base_cam, rig.base_frame, cam.frame_id, t0));
+    for (const auto& cam : given.cameras) statics.transforms.push_back(fm::toTransformMsg(cam.T_base_cam, rig.base_frame, cam.frame_id, t0));
     auto latched = boost::make_shared<ros::M_string>();
     (*latched)["latching"] = "1";
     (*latched)["callerid"] = "/make_drive";
@@ -280,7 +270,7 @@ int main(int argc, char** argv) {
       Eigen::Isometry3d T = world.egoPose(t);
       if (opt.pose_noise > 0) T.translation() += opt.pose_noise * Eigen::Vector3d(N(rng), N(rng), N(rng));
       tf2_msgs::TFMessage m;
-      m.transforms.push_back(toMsg(T, "map", rig.base_frame, t0 + ros::Duration(t)));
+      m.transforms.push_back(fm::toTransformMsg(T, "map", rig.base_frame, t0 + ros::Duration(t)));
       bag.write("/tf", t0 + ros::Duration(t), m);
     }
 
@@ -306,18 +296,15 @@ int main(int argc, char** argv) {
         if (drop) {
           ++dropped;
         } else {
-          bag.write(ns + "/image_raw", header.stamp, cv_bridge::CvImage(header, "mono8", frame.image).toImageMsg());
+          bag.write(ns + "/image_raw", header.stamp, fm::toImageMsg(header, frame.image));  // mono8
           ++images;
         }
         if (opt.gt_depth == "all" || (opt.gt_depth == "ref" && c == 0)) {
-          bag.write(ns + "/depth_gt", header.stamp, cv_bridge::CvImage(header, "32FC1", frame.depth).toImageMsg());
+          bag.write(ns + "/depth_gt", header.stamp, fm::toDepthMsg(header, frame.depth));
         }
         if (c == 0) {
           // Visible extent of each moving vehicle in the reference image.
-          fisheye_mapping::Detection2DArray dets;
-          dets.header = header;
-          dets.image_width = cam.model.width();
-          dets.image_height = cam.model.height();
+          std::vector<fm::Detection> dets;
           std::vector<cv::Rect> boxes(world.numVehicles());
           std::vector<int> counts(world.numVehicles(), 0);
           for (int v = 0; v < frame.ids.rows; ++v) {
@@ -330,15 +317,16 @@ int main(int argc, char** argv) {
           }
           for (int i = 0; i < world.numVehicles(); ++i) {
             if (counts[i] < 30) continue;
-            fisheye_mapping::Detection2D d;
+            fm::Detection d;
             d.x_min = boxes[i].x, d.y_min = boxes[i].y;
             d.x_max = boxes[i].x + boxes[i].width, d.y_max = boxes[i].y + boxes[i].height;
             d.class_id = 2;  // COCO "car"
             d.class_name = "car";
             d.score = 1.0f;
-            dets.detections.push_back(d);
+            dets.push_back(d);
           }
-          bag.write(ns + "/detections_gt", header.stamp, dets);
+          bag.write(ns + "/detections_gt", header.stamp,
+                    fm::toDetectionArrayMsg(header, cam.model.width(), cam.model.height(), dets));
         }
       }
       const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count();

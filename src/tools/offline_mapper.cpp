@@ -1,13 +1,14 @@
 // offline_mapper: the mapping pipeline over a rosbag without roscore, as fast
 // as the machine allows: frame sets grouped by exact stamp (core FrameSetSync),
-// plane-sweep depth (core PlaneSweep), moving objects masked (core Detector or
-// the drive's ground-truth boxes, core maskDepthBoxes), TSDF fusion (core
-// TsdfMap + TsdfMesher) with poses from the bag's /tf. The same core classes
-// and parameter names as the nodelets of vehicle.launch.
+// then the core FrameSetMapper (depth stage, detector or the drive's
+// ground-truth boxes, masking, TSDF fusion) with poses from the bag's /tf. The
+// same core stage objects, configs and parameter names as the nodelets of
+// vehicle.launch; this file only reads the bag and writes the results.
 //
 //   offline_mapper --bag B --camchain F --mount F --out DIR
 //                  [--config vehicle.yaml] [--detector none|ground_truth|nanodet|darknet|MODEL.yaml]
 //                  [--frames N] [--every K] [--world map] [--depth sweep|gt] [--quiet]
+//                  [--save-depth DIR]
 //
 // Writes DIR/mesh.ply, DIR/cloud.pcd, DIR/cloud_all.pcd (every voxel with a
 // surface, i.e. without the minimum-observation filter), DIR/timings.md (ms
@@ -16,6 +17,8 @@
 // it wrote. Exit status: 0; 1 when the run failed or a map file could not be
 // written (e.g. --frames 1: nothing observed often enough for a mesh; the
 // earlier file of that name stays); 2 on bad options or input paths.
+// --save-depth DIR writes each fused frame set's masked depth (what the depth
+// mask nodelet publishes on depth_masked) as DIR/<stamp in ns>.tiff.
 // --depth gt fuses the bag's ground-truth depth of the reference camera
 // (/<ref>/depth_gt) instead of the plane sweep: the reference map of the
 // evaluation (moving objects masked the same way). Parameters: the stage defaults of
@@ -39,6 +42,7 @@
 #include <map>
 #include <memory>
 #include <numeric>
+#include <optional>
 #include <string>
 #include <filesystem>
 #include <sstream>
@@ -46,14 +50,11 @@
 
 #include "cli.h"
 #include "fisheye_mapping/Detection2DArray.h"
-#include "fisheye_mapping/core/detection/depth_mask.h"
-#include "fisheye_mapping/core/detection/detector.h"
-#include "fisheye_mapping/core/sync/frame_sync.h"
-#include "fisheye_mapping/core/common/params.h"
-#include "fisheye_mapping/core/depth/plane_sweep.h"
 #include "fisheye_mapping/core/camera/rig.h"
-#include "fisheye_mapping/core/tsdf/tsdf_map.h"
-#include "fisheye_mapping/core/tsdf/tsdf_mesher.h"
+#include "fisheye_mapping/core/common/params.h"
+#include "fisheye_mapping/core/depth/depth_image.h"
+#include "fisheye_mapping/core/mapping/frame_set_mapper.h"
+#include "fisheye_mapping/core/sync/frame_sync.h"
 
 namespace fm = fisheye_mapping;
 namespace cli = fm::cli;
@@ -66,7 +67,7 @@ double msSince(Clock::time_point t0) { return std::chrono::duration<double, std:
 void usage() {
   std::cerr << "usage: offline_mapper --bag B --camchain F --mount F --out DIR [--config vehicle.yaml]\n"
                "       [--detector none|ground_truth|nanodet|darknet|MODEL.yaml] [--frames N] [--every K]\n"
-               "       [--world map] [--depth sweep|gt] [--config-dir DIR] [--quiet]\n"
+               "       [--world map] [--depth sweep|gt] [--config-dir DIR] [--save-depth DIR] [--quiet]\n"
                "  --frames N  map at most N frame sets, N in [1, 10000000] (default: all)\n"
                "  --every K   map every K-th frame set, K in [1, 1000000] (default 1)\n"
                "  Outputs are written under temporary names and renamed once complete: a failed\n"
@@ -99,6 +100,7 @@ double median(std::vector<double> v) {
 
 int main(int argc, char** argv) {
   std::string bag_path, camchain, mount, out, config_path, detector = "ground_truth", world = "map", depth_src = "sweep";
+  std::string save_depth;
   std::string config_dir = FM_CONFIG_DIR;
   int max_frames = 0, every = 1;
   bool quiet = false;
@@ -120,6 +122,7 @@ int main(int argc, char** argv) {
       else if (a == "--every") every = static_cast<int>(cli::parseInt(a, next(), 1, 1000000));
       else if (a == "--world") world = next();
       else if (a == "--depth") depth_src = next();
+      else if (a == "--save-depth") save_depth = next();
       else if (a == "--quiet") quiet = true;
       else if (a == "-h" || a == "--help") {
         usage();
@@ -141,6 +144,7 @@ int main(int argc, char** argv) {
     if (detector != "none" && detector != "ground_truth" && detector != "nanodet" && detector != "darknet")
       cli::requireInputFile("--detector", detector);
     cli::prepareOutputDir("--out", out);
+    if (!save_depth.empty()) cli::prepareOutputDir("--save-depth", save_depth);
   } catch (const cli::UsageError& e) {
     std::cerr << "offline_mapper: " << e.what() << "\n";
     usage();
@@ -154,18 +158,8 @@ int main(int argc, char** argv) {
     const fm::YamlParams sweep_p(stageParams(config_dir + "/plane_sweep_depth.yaml", config, "plane_sweep"), "plane_sweep");
     const fm::YamlParams tsdf_p(stageParams(config_dir + "/tsdf_fusion.yaml", config, "tsdf"), "tsdf");
     const fm::YamlParams mask_p(stageParams("", config, "depth_mask"), "depth_mask");
-    fm::PlaneSweep sweep(fm::planeSweepConfigFrom(sweep_p));
-    const fm::TsdfConfig tsdf_cfg = fm::tsdfConfigFrom(tsdf_p);
-    fm::TsdfMap map(tsdf_cfg);
-    fm::TsdfMesher mesher(tsdf_cfg.min_observations);
-    fm::TsdfMesher mesher_all(1);  // no minimum-observation filter
-    double margin = 10.0;
-    mask_p.get("margin_px", margin);
-    std::string ref_name = "cam0";
-    sweep_p.get("reference_camera", ref_name);
-    const int ref = rig.indexOf(ref_name);
-    if (ref < 0) throw std::runtime_error("reference camera '" + ref_name + "' is not in the rig");
-
+    const fm::YamlParams det_p(stageParams("", config, "detector"), "detector");
+    const fm::FrameSetMapperConfig mapper_cfg = fm::FrameSetMapperConfig::fromParams(sweep_p, det_p, mask_p, tsdf_p);
     std::unique_ptr<fm::Detector> det;
     if (detector != "none" && detector != "ground_truth") {
       std::string yaml = detector;
@@ -173,8 +167,13 @@ int main(int argc, char** argv) {
       else if (detector == "darknet") yaml = config_dir + "/detector/yolov3-tiny.yaml";
       det = std::make_unique<fm::Detector>(fm::loadDetectorConfig(yaml));
     }
+    const bool detecting = det != nullptr;
+    fm::FrameSetMapper mapper(rig, mapper_cfg, std::move(det));
+    const fm::TsdfConfig& tsdf_cfg = mapper_cfg.tsdf;
+    fm::TsdfMesher mesher_all(1);  // no minimum-observation filter
+    const int ref = mapper.reference();
 
-    if (det && depth_src == "gt")
+    if (detecting && depth_src == "gt")
       throw std::runtime_error("--depth gt works with --detector ground_truth or none (no images are read)");
     const auto toMat = [](const sensor_msgs::Image::ConstPtr& im) {
       return cv_bridge::toCvShare(im, im->encoding == "mono8" ? "mono8" : "bgr8")->image;
@@ -250,55 +249,36 @@ int main(int argc, char** argv) {
           if (!quiet) std::fprintf(stderr, "\nframe set %.3f skipped: no pose (%s)\n", stamp.toSec(), e.what());
           continue;
         }
-        const auto ts = Clock::now();
-        fm::DepthResult r;
-        cv::Mat ref_img;  // the reference camera's image (sweep mode)
-        if (depth_src == "gt") {
-          if (set[0]->encoding != "32FC1") throw std::runtime_error(gt_depth_topic + " is not 32FC1");
-          r.depth = cv_bridge::toCvCopy(set[0])->image;
-        } else {
-          std::vector<fm::SweepView> views;
-          ref_img = toMat(set[ref]);
-          const fm::SweepView ref_view = fm::rigSweepView(rig, ref, ref, ref_img);
-          for (int c = 0; c < int(set.size()); ++c)
-            if (c != ref) views.push_back(fm::rigSweepView(rig, c, ref, toMat(set[c])));
-          const Eigen::Isometry3d T_base_ref = rig.cameras[ref].T_base_cam;
-          r = sweep.compute(ref_view, views, &T_base_ref);
-        }
-        const double sweep_ms = msSince(ts);
-        // Moving objects.
-        const auto td = Clock::now();
-        std::vector<fm::Detection> boxes;
-        int bw = r.depth.cols, bh = r.depth.rows;
-        if (det) {
-          boxes = det->detect(ref_img, true);
-          bw = ref_img.cols, bh = ref_img.rows;
-        } else if (detector == "ground_truth") {
+        std::optional<fm::ImageBoxes> boxes;
+        if (!detecting && detector == "ground_truth") {
           auto it = gt_boxes.find(stamp.toNSec());
           if (it == gt_boxes.end()) {
             ++no_boxes;
           } else {
-            bw = int(it->second->image_width), bh = int(it->second->image_height);
+            boxes.emplace();
+            boxes->image_width = int(it->second->image_width), boxes->image_height = int(it->second->image_height);
             for (const auto& b : it->second->detections) {
               fm::Detection d;
               d.x_min = b.x_min, d.y_min = b.y_min, d.x_max = b.x_max, d.y_max = b.y_max;
-              boxes.push_back(d);
+              boxes->boxes.push_back(d);
             }
           }
         }
-        const double det_ms = msSince(td);
-        const auto tm = Clock::now();
-        const cv::Mat mask = fm::maskDepthBoxes(r.depth, boxes, float(margin), bw > 0 ? bw : r.depth.cols,
-                                                bh > 0 ? bh : r.depth.rows);
-        const double mask_ms = msSince(tm);
-        const auto tf0 = Clock::now();
-        const fm::IntegrationStats st =
-            map.integrate(r.depth, rig.cameras[ref].model, T_W_B * rig.cameras[ref].T_base_cam, T_W_B.translation());
-        // The mesh follows the map every 10 frame sets (and once more at the
-        // end): the cloud and mesh come out the same, for a tenth of the cost.
-        if (processed % 10 == 9) mesher.update(map);
-        const double fuse_ms = msSince(tf0);
+        fm::FrameSetResult r;
+        if (depth_src == "gt") {
+          if (set[0]->encoding != "32FC1") throw std::runtime_error(gt_depth_topic + " is not 32FC1");
+          r = mapper.processDepth(cv_bridge::toCvCopy(set[0])->image, T_W_B, boxes);
+        } else {
+          std::vector<cv::Mat> images;
+          for (const auto& im : set) images.push_back(toMat(im));
+          r = mapper.process(images, T_W_B, boxes);
+        }
+        if (!save_depth.empty())
+          fm::writeDepthTiff(save_depth + "/" + std::to_string(stamp.toNSec()) + ".tiff", r.depth.depth);
+        const double sweep_ms = r.ms.depth_ms, det_ms = r.ms.detect_ms, mask_ms = r.ms.mask_ms, fuse_ms = r.ms.fuse_ms;
         const double total = msSince(t0);
+        const fm::IntegrationStats& st = r.fusion;
+        const cv::Mat& mask = r.mask;
         t_sweep.push_back(sweep_ms), t_det.push_back(det_ms), t_mask.push_back(mask_ms), t_fuse.push_back(fuse_ms),
             t_total.push_back(total);
         csv << std::fixed << stamp.toSec() << "," << sweep_ms << "," << det_ms << "," << mask_ms << "," << fuse_ms << ","
@@ -317,8 +297,9 @@ int main(int argc, char** argv) {
     if (!quiet) std::fprintf(stderr, "\n");
     if (processed == 0) throw std::runtime_error("no complete frame set with a pose in " + bag_path);
     const double wall = std::chrono::duration<double>(Clock::now() - run_start).count();
-    mesher.update(map);       // the frame sets since the last update
-    mesher_all.rebuild(map);  // every block of both stores, after the last frame
+    mapper.finish();                   // the frame sets since the last mesh update
+    mesher_all.rebuild(mapper.map());  // every block of both stores, after the last frame
+    const fm::TsdfMesher& mesher = mapper.mesher();
     // Each file is written under a temporary name and renamed over the old one
     // only once complete: a failed save keeps what an earlier run wrote.
     std::vector<std::string> written, not_written;
@@ -349,7 +330,7 @@ int main(int argc, char** argv) {
       md << buf;
     };
     row(depth_src == "gt" ? "ground-truth depth (read)" : "plane-sweep depth", t_sweep);
-    row(det ? "detection" : "ground-truth boxes", t_det);
+    row(detecting ? "detection" : "ground-truth boxes", t_det);
     row("masking", t_mask);
     row("TSDF fusion + mesh update", t_fuse);
     row("total per frame set", t_total);
@@ -358,7 +339,7 @@ int main(int argc, char** argv) {
                   "%lu incomplete sets dropped, %zu without a pose, %zu without ground-truth boxes; "
                   "sweep backend %s; map: %zu triangles, %zu cloud points.\n",
                   processed, wall, processed / wall, (unsigned long)s.dropped_incomplete, skipped_pose, no_boxes,
-                  sweep.backendName().c_str(), mesher.numTriangles(), mesher.surfaceCloud().size());
+                  mapper.depthStage().backendName().c_str(), mesher.numTriangles(), mesher.surfaceCloud().size());
     md << buf;
     csv.close();
     if (!csv) throw std::runtime_error("cannot write " + csv_tmp + " (disk full?)");

@@ -20,7 +20,6 @@
 #include <set>
 #include <sstream>
 
-#include <cv_bridge/cv_bridge.h>
 #include <opencv2/imgcodecs.hpp>
 #include <rosbag/bag.h>
 #include <rosbag/view.h>
@@ -29,8 +28,10 @@
 
 #include "fisheye_mapping/core/depth/depth_image.h"
 #include "fisheye_mapping/core/common/params.h"
+#include "fisheye_mapping/core/depth/depth_stage.h"
 #include "fisheye_mapping/core/depth/plane_sweep.h"
 #include "fisheye_mapping/core/camera/rig.h"
+#include "fisheye_mapping/ros/conversions.h"
 
 namespace fm = fisheye_mapping;
 
@@ -52,27 +53,6 @@ std::pair<std::string, std::string> split(const std::string& kv, const std::stri
   return {kv.substr(0, eq), kv.substr(eq + 1)};
 }
 
-// The parameters a config reader asked for, so that unknown names (typos)
-// are reported instead of ignored.
-class AskedParams : public fm::ParamSource {
- public:
-  explicit AskedParams(const fm::ParamSource& inner) : inner_(inner) {}
-  bool get(const std::string& k, double& v) const override { return ask(k, v); }
-  bool get(const std::string& k, int& v) const override { return ask(k, v); }
-  bool get(const std::string& k, bool& v) const override { return ask(k, v); }
-  bool get(const std::string& k, std::string& v) const override { return ask(k, v); }
-  bool get(const std::string& k, std::vector<double>& v) const override { return ask(k, v); }
-  mutable std::set<std::string> asked{"reference_camera", "support_cameras", "self_masks", "publish_uniqueness"};
-
- private:
-  template <class T>
-  bool ask(const std::string& k, T& v) const {
-    asked.insert(k);
-    return inner_.get(k, v);
-  }
-  const fm::ParamSource& inner_;
-};
-
 // The plane-sweep configuration of a YAML file (the names of
 // config/plane_sweep_depth.yaml) with --set overrides, read by the same core
 // function as the nodelet's.
@@ -88,11 +68,16 @@ fm::PlaneSweepConfig readConfig(const std::string& path, const std::vector<std::
   }
   for (const auto& [k, v] : sets) y[k] = YAML::Load(v);
   const fm::YamlParams yaml(y, path.empty() ? "--set" : path);
-  const AskedParams asked(yaml);
-  const fm::PlaneSweepConfig config = fm::planeSweepConfigFrom(asked);
+  // The depth stage's names (reference camera, supporting views, masks) are
+  // known too: the same file configures the nodelet.
+  const fm::RecordingParams asked(yaml);
+  const fm::PlaneSweepConfig config = fm::PlaneSweepConfig::fromParams(asked);
+  fm::RecordingParams stage_names;
+  fm::DepthStageConfig::fromParams(stage_names);
+  const std::set<std::string> node_names{"publish_uniqueness", "time_reset_threshold"};
   for (const auto& kv : y) {
     const std::string key = kv.first.as<std::string>();
-    if (!asked.asked.count(key)) throw std::invalid_argument("unknown parameter '" + key + "'");
+    if (!asked.asked().count(key) && !stage_names.asked().count(key) && !node_names.count(key)) throw std::invalid_argument("unknown parameter '" + key + "'");
   }
   return config;
 }
@@ -196,7 +181,7 @@ int main(int argc, char** argv) {
       auto& slot = pending[msg->header.stamp];
       slot.resize(rig.cameras.size());
       try {
-        slot[cam] = cv_bridge::toCvCopy(msg)->image;
+        slot[cam] = fm::toCvImage(*msg, fm::ImageTarget::kSweep, m.getTopic());
       } catch (const std::exception& e) {
         std::cerr << "\nplane_sweep_depth: " << m.getTopic() << " at " << msg->header.stamp << ": " << e.what() << "\n";
       }

@@ -15,7 +15,6 @@
 #include <rosbag/bag.h>
 #include <rosbag/view.h>
 #include <sensor_msgs/Image.h>
-#include <cv_bridge/cv_bridge.h>
 
 #include <cstdio>
 #include <iostream>
@@ -28,6 +27,7 @@
 
 #include "fisheye_mapping/core/sync/frame_sync.h"
 #include "fisheye_mapping/core/camera/rig.h"
+#include "fisheye_mapping/ros/conversions.h"
 #include "fisheye_mapping/core/camera/rig_refinement.h"
 
 namespace fm = fisheye_mapping;
@@ -143,11 +143,7 @@ int main(int argc, char** argv) {
         if (seen++ % every != 0) continue;
         std::vector<cv::Mat> mats;
         for (int c = 0; c < n_cams; ++c) {
-          try {
-            mats.push_back(cv_bridge::toCvCopy(set[c], "mono8")->image);
-          } catch (const std::exception& e) {
-            throw std::runtime_error(topics[c] + ": cannot convert " + set[c]->encoding + " to mono8: " + e.what());
-          }
+          mats.push_back(fm::toGrey(*set[c], topics[c]));  // throws naming the topic and the encoding
         }
         sets.push_back(std::move(mats));
       }

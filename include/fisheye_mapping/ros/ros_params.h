@@ -2,11 +2,15 @@
 #ifndef FISHEYE_MAPPING_ROS_ROS_PARAMS_H_
 #define FISHEYE_MAPPING_ROS_ROS_PARAMS_H_
 
+#include <map>
 #include <string>
+#include <vector>
 
+#include <dynamic_reconfigure/Config.h>
 #include <ros/node_handle.h>
 
 #include "fisheye_mapping/core/common/params.h"
+#include "fisheye_mapping/core/tsdf/tsdf_map.h"
 #include "fisheye_mapping/core/depth/plane_sweep.h"
 #include "fisheye_mapping/core/camera/rig.h"
 
@@ -25,9 +29,34 @@ class RosParams : public ParamSource {
   bool get(const std::string& key, bool& v) const override { return nh_.getParam(key, v); }
   bool get(const std::string& key, std::string& v) const override { return nh_.getParam(key, v); }
   bool get(const std::string& key, std::vector<double>& v) const override { return nh_.getParam(key, v); }
+  bool get(const std::string& key, std::vector<std::string>& v) const override { return nh_.getParam(key, v); }
+  bool get(const std::string& key, std::map<std::string, std::string>& v) const override {
+    return nh_.getParam(key, v);
+  }
+  using ParamSource::get;
 
  private:
   ros::NodeHandle nh_;
+};
+
+// The values of a dynamic_reconfigure configuration (Config::__toMessage__)
+// as a core ParamSource, so that a reconfigure callback fills the core config
+// through the same fromParams() as the node's start-up parameters: no
+// parameter name is mapped twice. Lists and maps are never present.
+class ReconfigureParams : public ParamSource {
+ public:
+  explicit ReconfigureParams(dynamic_reconfigure::Config config) : c_(std::move(config)) {}
+  bool get(const std::string& key, double& v) const override;
+  bool get(const std::string& key, int& v) const override;
+  bool get(const std::string& key, bool& v) const override;
+  bool get(const std::string& key, std::string& v) const override;
+  bool get(const std::string& key, std::vector<double>&) const override { return false; }
+  bool get(const std::string& key, std::vector<std::string>&) const override { return false; }
+  bool get(const std::string& key, std::map<std::string, std::string>&) const override { return false; }
+  using ParamSource::get;
+
+ private:
+  dynamic_reconfigure::Config c_;
 };
 
 // Fills a PlaneSweepConfig from private parameters of the same names

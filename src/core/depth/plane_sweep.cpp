@@ -106,6 +106,54 @@ void windowStats(const cv::Mat& img, int radius, cv::Mat* mean, cv::Mat* stddev)
 
 }  // namespace
 
+SweepAggregation parseSweepAggregation(const std::string& s) {
+  if (s == "average") return SweepAggregation::Average;
+  if (s == "best_k") return SweepAggregation::BestK;
+  throw std::invalid_argument("aggregation: must be 'average' or 'best_k', got '" + s + "'");
+}
+
+SweepResolution parseSweepResolution(const std::string& s) {
+  if (s == "full") return SweepResolution::Full;
+  if (s == "half") return SweepResolution::Half;
+  if (s == "multiscale") return SweepResolution::Multiscale;
+  throw std::invalid_argument("resolution: must be 'full', 'half' or 'multiscale', got '" + s + "'");
+}
+
+SweepBackendType parseSweepBackend(const std::string& s) {
+  if (s == "auto") return SweepBackendType::Auto;
+  if (s == "native") return SweepBackendType::Native;
+  if (s == "opencl") return SweepBackendType::OpenCl;
+  if (s == "cpu") return SweepBackendType::Cpu;
+  throw std::invalid_argument("backend: must be 'auto', 'native', 'opencl' or 'cpu', got '" + s + "'");
+}
+
+std::string toString(SweepAggregation a) {
+  switch (a) {
+    case SweepAggregation::Average: return "average";
+    case SweepAggregation::BestK: return "best_k";
+  }
+  return "?";
+}
+
+std::string toString(SweepResolution r) {
+  switch (r) {
+    case SweepResolution::Full: return "full";
+    case SweepResolution::Half: return "half";
+    case SweepResolution::Multiscale: return "multiscale";
+  }
+  return "?";
+}
+
+std::string toString(SweepBackendType b) {
+  switch (b) {
+    case SweepBackendType::Auto: return "auto";
+    case SweepBackendType::Native: return "native";
+    case SweepBackendType::OpenCl: return "opencl";
+    case SweepBackendType::Cpu: return "cpu";
+  }
+  return "?";
+}
+
 void DepthFilterConfig::validate() const {
   require(std::isfinite(min_texture_snr) && min_texture_snr >= 0, "filters.min_texture_snr", "must be >= 0");
   require(std::isfinite(min_noise_std) && min_noise_std > 0, "filters.min_noise_std", "must be positive");
@@ -128,18 +176,20 @@ void PlaneSweepConfig::validate() const {
           "must be greater than ground_min");
   require(window_full >= 3 && window_full % 2 == 1, "window_full", "must be odd and >= 3");
   require(window_half >= 3 && window_half % 2 == 1, "window_half", "must be odd and >= 3");
-  require(aggregation == "average" || aggregation == "best_k", "aggregation",
-          "must be 'average' or 'best_k', got '" + aggregation + "'");
+  require(aggregation == SweepAggregation::Average || aggregation == SweepAggregation::BestK, "aggregation",
+          "must be 'average' or 'best_k', got " + std::to_string(static_cast<int>(aggregation)));
   require(best_k >= 1, "best_k", "must be at least 1");
-  require(resolution == "full" || resolution == "half" || resolution == "multiscale", "resolution",
-          "must be 'full', 'half' or 'multiscale', got '" + resolution + "'");
+  require(resolution == SweepResolution::Full || resolution == SweepResolution::Half ||
+              resolution == SweepResolution::Multiscale,
+          "resolution", "must be 'full', 'half' or 'multiscale', got " + std::to_string(static_cast<int>(resolution)));
   require(crop_width > 0 && crop_width <= 1, "crop_width", "must be in (0, 1]");
   require(crop_height > 0 && crop_height <= 1, "crop_height", "must be in (0, 1]");
   require(min_parallax_px >= 0, "min_parallax_px", "must be >= 0");
   require(min_parallax_ratio >= 0 && min_parallax_ratio <= 1, "min_parallax_ratio", "must be in [0, 1]");
   require(min_overlap >= 0 && min_overlap <= 1, "min_overlap", "must be in [0, 1]");
-  require(backend == "auto" || backend == "native" || backend == "opencl" || backend == "cpu", "backend",
-          "must be 'auto', 'native', 'opencl' or 'cpu', got '" + backend + "'");
+  require(backend == SweepBackendType::Auto || backend == SweepBackendType::Native ||
+              backend == SweepBackendType::OpenCl || backend == SweepBackendType::Cpu,
+          "backend", "must be 'auto', 'native', 'opencl' or 'cpu', got " + std::to_string(static_cast<int>(backend)));
   require(band_rows >= 1, "band_rows", "must be at least 1");
   filters.validate();
 }
@@ -413,11 +463,12 @@ SweepView rigSweepView(const Rig& rig, int index, int ref_index, const cv::Mat& 
 
 PlaneSweep::PlaneSweep(const PlaneSweepConfig& config) : config_(config) {
   config_.validate();
-  std::string backend = config_.backend;
-  if (backend == "auto") backend = (!config_.device.empty() || OpenClContext::hasGpu()) ? "opencl" : "native";
-  if (backend == "cpu") {
+  SweepBackendType backend = config_.backend;
+  if (backend == SweepBackendType::Auto)
+    backend = (!config_.device.empty() || OpenClContext::hasGpu()) ? SweepBackendType::OpenCl : SweepBackendType::Native;
+  if (backend == SweepBackendType::Cpu) {
     backend_ = makeCpuSweepBackend();
-  } else if (backend == "native") {
+  } else if (backend == SweepBackendType::Native) {
     backend_ = makeNativeSweepBackend();
   } else {
     backend_ = makeOpenClSweepBackend(config_.device);
@@ -542,7 +593,7 @@ DepthResult PlaneSweep::compute(const SweepView& ref, const std::vector<SweepVie
       return cam;
     };
     cv::Mat range, cost, ratio, texture;
-    if (config_.resolution == "full") {
+    if (config_.resolution == SweepResolution::Full) {
       run(0, &result.raw_depth, &result.cost, &result.uniqueness, &result.texture);
     } else {
       run(1, &range, &cost, &ratio, &texture);
@@ -550,7 +601,7 @@ DepthResult PlaneSweep::compute(const SweepView& ref, const std::vector<SweepVie
       result.cost = upsampleNearest(cost, W, H);
       result.uniqueness = upsampleNearest(ratio, W, H);
       result.texture = upsampleNearest(texture, W, H);
-      if (config_.resolution == "multiscale") {
+      if (config_.resolution == SweepResolution::Multiscale) {
         const CameraModel crop = run(2, &range, &cost, &ratio, &texture);
         const int x0 = static_cast<int>(std::lround(ref.camera.params().cx - crop.params().cx));
         const int y0 = static_cast<int>(std::lround(ref.camera.params().cy - crop.params().cy));
@@ -593,6 +644,51 @@ DepthResult PlaneSweep::compute(const SweepView& ref, const std::vector<SweepVie
   result.filter_ms = msSince(t1);
   result.total_ms = msSince(t0);
   return result;
+}
+
+DepthFilterConfig DepthFilterConfig::fromParams(const ParamSource& p, DepthFilterConfig base) {
+  DepthFilterConfig& f = base;
+  p.get("filter_texture", f.texture);
+  p.get("min_texture_snr", f.min_texture_snr);
+  p.get("min_noise_std", f.min_noise_std);
+  p.get("filter_cost", f.cost);
+  p.get("alpha_upper", f.alpha_upper);
+  p.get("alpha_lower", f.alpha_lower);
+  p.get("split_row", f.split_row);
+  p.get("filter_uniqueness", f.uniqueness);
+  p.get("max_ratio", f.max_ratio);
+  p.get("filter_consistency", f.consistency);
+  p.get("consistency_window", f.consistency_window);
+  p.get("gamma", f.gamma);
+  p.get("delta", f.delta);
+  f.validate();
+  return f;
+}
+
+PlaneSweepConfig PlaneSweepConfig::fromParams(const ParamSource& p) {
+  PlaneSweepConfig c;
+  p.get("fronto_planes", c.fronto_planes);
+  p.get("near", c.near);
+  p.get("far", c.far);
+  p.get("ground_planes", c.ground_planes);
+  p.get("ground_min", c.ground_min);
+  p.get("ground_max", c.ground_max);
+  p.get("window_full", c.window_full);
+  p.get("window_half", c.window_half);
+  if (std::string v; p.get("aggregation", v)) c.aggregation = parseSweepAggregation(v);
+  p.get("best_k", c.best_k);
+  p.get("subpixel", c.subpixel);
+  if (std::string v; p.get("resolution", v)) c.resolution = parseSweepResolution(v);
+  p.get("crop_width", c.crop_width);
+  p.get("crop_height", c.crop_height);
+  p.get("min_parallax_px", c.min_parallax_px);
+  p.get("min_parallax_ratio", c.min_parallax_ratio);
+  p.get("min_overlap", c.min_overlap);
+  if (std::string v; p.get("backend", v)) c.backend = parseSweepBackend(v);
+  p.get("device", c.device);
+  c.filters = DepthFilterConfig::fromParams(p, c.filters);
+  c.validate();
+  return c;
 }
 
 }  // namespace fisheye_mapping

@@ -89,7 +89,7 @@ class ClSweepBackend : public SweepBackend {
     cost_.setArg(4, w);
     cost_.setArg(5, h);
     cost_.setArg(6, band);
-    cost_.setArg(7, config.aggregation == "best_k" ? FM_AGGREGATE_BEST_K : FM_AGGREGATE_AVERAGE);
+    cost_.setArg(7, config.aggregation == SweepAggregation::BestK ? FM_AGGREGATE_BEST_K : FM_AGGREGATE_AVERAGE);
     cost_.setArg(8, config.best_k);
     cost_.setArg(10, s.volume.buffer);
     const cl::NDRange warp_global(npix);

@@ -20,7 +20,7 @@ class CpuSweepBackend : public SweepBackend {
     const int r = level.radius;
     const int n_planes = static_cast<int>(planes.size());
     const float* rays = level.rays->data();
-    const int mode = config.aggregation == "best_k" ? FM_AGGREGATE_BEST_K : FM_AGGREGATE_AVERAGE;
+    const int mode = config.aggregation == SweepAggregation::BestK ? FM_AGGREGATE_BEST_K : FM_AGGREGATE_AVERAGE;
     std::vector<float> volume(static_cast<size_t>(n_planes) * npix);
     std::vector<float> warped(static_cast<size_t>(views) * npix);
     for (int p = 0; p < n_planes; ++p) {

@@ -161,7 +161,7 @@ class NativeSweepBackend : public SweepBackend {
     L.r = level.radius;
     L.views = static_cast<int>(level.cameras.size());
     L.n_planes = static_cast<int>(planes.size());
-    L.mode = config.aggregation == "best_k" ? FM_AGGREGATE_BEST_K : FM_AGGREGATE_AVERAGE;
+    L.mode = config.aggregation == SweepAggregation::BestK ? FM_AGGREGATE_BEST_K : FM_AGGREGATE_AVERAGE;
     L.k = config.best_k;
     L.subpixel = config.subpixel ? 1 : 0;
     L.band = config.band_rows;

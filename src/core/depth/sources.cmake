@@ -5,4 +5,5 @@ set(FM_DEPTH_SOURCES
   plane_sweep_cl.cpp
   plane_sweep_native.cpp
   depth_image.cpp
+  depth_stage.cpp
 )

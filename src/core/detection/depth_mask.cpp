@@ -3,9 +3,52 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <sstream>
 #include <stdexcept>
+#include <string>
+
+#include "fisheye_mapping/core/common/params.h"
 
 namespace fisheye_mapping {
+
+namespace {
+
+void require(bool ok, const std::string& field, const std::string& what, double value) {
+  if (ok) return;
+  std::ostringstream s;
+  s << field << ": " << what << ", got " << value;
+  throw std::invalid_argument(s.str());
+}
+
+}  // namespace
+
+void DepthMaskConfig::validate() const {
+  require(std::isfinite(margin_px) && margin_px >= 0, "margin_px", "must be >= 0 pixels", margin_px);
+  require(std::isfinite(wait_for_detections) && wait_for_detections >= 0, "wait_for_detections",
+          "must be >= 0 seconds", wait_for_detections);
+  require(max_pending >= 1, "max_pending", "must be at least 1", max_pending);
+  require(!std::isnan(time_reset_threshold), "time_reset_threshold", "must be a number of seconds (<= 0: never)",
+          time_reset_threshold);
+  require(std::isfinite(colour_near) && colour_near > 0, "colour_range", "near must be positive", colour_near);
+  require(std::isfinite(colour_far) && colour_far > colour_near, "colour_range", "far must be greater than near",
+          colour_far);
+}
+
+DepthMaskConfig DepthMaskConfig::fromParams(const ParamSource& p) {
+  DepthMaskConfig c;
+  p.get("margin_px", c.margin_px);
+  p.get("wait_for_detections", c.wait_for_detections);
+  p.get("max_pending", c.max_pending);
+  p.get("time_reset_threshold", c.time_reset_threshold);
+  if (std::vector<double> range; p.get("colour_range", range)) {
+    if (range.size() != 2)
+      throw std::invalid_argument("colour_range: needs 2 values [near, far], got " + std::to_string(range.size()));
+    c.colour_near = range[0];
+    c.colour_far = range[1];
+  }
+  c.validate();
+  return c;
+}
 
 cv::Mat maskDepthBoxes(cv::Mat& depth, const std::vector<Detection>& boxes, float margin_px, int image_w,
                        int image_h) {

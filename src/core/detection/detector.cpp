@@ -1,5 +1,7 @@
 #include "fisheye_mapping/core/detection/detector.h"
 
+#include "fisheye_mapping/core/common/params.h"
+
 #include <opencv2/dnn.hpp>
 #include <opencv2/imgproc.hpp>
 #include <yaml-cpp/yaml.h>
@@ -9,6 +11,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <map>
+#include <sstream>
 #include <stdexcept>
 
 namespace fisheye_mapping {
@@ -24,6 +27,16 @@ bool fileExists(const std::string& path) {
   std::ifstream f(path);
   return f.good();
 }
+
+std::string number(double v) {
+  std::ostringstream s;
+  s << v;
+  return s.str();
+}
+
+// The thresholds' ranges (model YAML and stage overrides alike).
+bool scoreThresholdOk(double v) { return v > 0.0 && v < 1.0; }
+bool nmsThresholdOk(double v) { return v > 0.0 && v <= 1.0; }
 
 }  // namespace
 
@@ -134,8 +147,9 @@ DetectorConfig loadDetectorConfig(const std::string& yaml_path) {
     if (c.class_names.empty()) throw fail("class_names", "is empty");
     if (root["score_threshold"]) c.score_threshold = root["score_threshold"].as<float>();
     if (root["nms_threshold"]) c.nms_threshold = root["nms_threshold"].as<float>();
-    if (!(c.score_threshold > 0.f && c.score_threshold < 1.f)) throw fail("score_threshold", "must be in (0, 1)");
-    if (!(c.nms_threshold > 0.f && c.nms_threshold <= 1.f)) throw fail("nms_threshold", "must be in (0, 1]");
+    if (!scoreThresholdOk(c.score_threshold))
+      throw fail("score_threshold", "must be in (0, 1), got " + number(c.score_threshold));
+    if (!nmsThresholdOk(c.nms_threshold)) throw fail("nms_threshold", "must be in (0, 1], got " + number(c.nms_threshold));
     if (root["moving_classes"]) c.moving_classes = root["moving_classes"].as<std::vector<std::string>>();
     if (root["persons_moving"] && root["persons_moving"].as<bool>()) c.moving_classes.push_back("person");
     for (const auto& m : c.moving_classes)
@@ -164,6 +178,72 @@ DetectorConfig loadDetectorConfig(const std::string& yaml_path) {
   } catch (const YAML::Exception& e) {
     throw std::runtime_error("detector model config " + yaml_path + ": " + e.what());
   }
+  return c;
+}
+
+DnnBackend parseDnnBackend(const std::string& s) {
+  if (s == "opencv") return DnnBackend::OpenCv;
+  if (s == "default") return DnnBackend::Default;
+  throw std::invalid_argument("dnn_backend: must be 'opencv' or 'default', got '" + s + "'");
+}
+
+DnnTarget parseDnnTarget(const std::string& s) {
+  if (s == "cpu") return DnnTarget::Cpu;
+  if (s == "opencl") return DnnTarget::OpenCl;
+  if (s == "opencl_fp16") return DnnTarget::OpenClFp16;
+  throw std::invalid_argument("dnn_target: must be 'cpu', 'opencl' or 'opencl_fp16', got '" + s + "'");
+}
+
+std::string toString(DnnBackend b) {
+  switch (b) {
+    case DnnBackend::OpenCv: return "opencv";
+    case DnnBackend::Default: return "default";
+  }
+  return "?";
+}
+
+std::string toString(DnnTarget t) {
+  switch (t) {
+    case DnnTarget::Cpu: return "cpu";
+    case DnnTarget::OpenCl: return "opencl";
+    case DnnTarget::OpenClFp16: return "opencl_fp16";
+  }
+  return "?";
+}
+
+void DetectorStageConfig::validate() const {
+  if (score_threshold && !scoreThresholdOk(*score_threshold))
+    throw std::invalid_argument("score_threshold: must be in (0, 1), got " + number(*score_threshold));
+  if (nms_threshold && !nmsThresholdOk(*nms_threshold))
+    throw std::invalid_argument("nms_threshold: must be in (0, 1], got " + number(*nms_threshold));
+  if (toString(dnn_backend) == "?")
+    throw std::invalid_argument("dnn_backend: not a backend (" + std::to_string(int(dnn_backend)) + ")");
+  if (toString(dnn_target) == "?")
+    throw std::invalid_argument("dnn_target: not a target (" + std::to_string(int(dnn_target)) + ")");
+}
+
+DetectorStageConfig DetectorStageConfig::fromParams(const ParamSource& p) {
+  DetectorStageConfig c;
+  p.get("model_config", c.model_config);
+  if (double v; p.get("score_threshold", v)) c.score_threshold = static_cast<float>(v);
+  if (double v; p.get("nms_threshold", v)) c.nms_threshold = static_cast<float>(v);
+  if (std::string v; p.get("dnn_backend", v)) c.dnn_backend = parseDnnBackend(v);
+  if (std::string v; p.get("dnn_target", v)) c.dnn_target = parseDnnTarget(v);
+  p.get("only_moving", c.only_moving);
+  p.get("publish_annotated", c.publish_annotated);
+  c.validate();
+  return c;
+}
+
+DnnDevice DetectorStageConfig::device() const { return DnnDevice{toString(dnn_backend), toString(dnn_target)}; }
+
+DetectorConfig DetectorStageConfig::loadModel() const {
+  if (model_config.empty())
+    throw std::runtime_error("model_config (path of a model YAML, see config/detector/) is not set");
+  validate();
+  DetectorConfig c = loadDetectorConfig(model_config);
+  if (score_threshold) c.score_threshold = *score_threshold;
+  if (nms_threshold) c.nms_threshold = *nms_threshold;
   return c;
 }
 
@@ -466,14 +546,28 @@ Detector::Detector(const DetectorConfig& cfg, const DnnDevice& device) : cfg_(cf
     throw std::runtime_error("detector: cannot load model " + cfg.model_path + ": " + e.what());
   }
   if (impl_->net.empty()) throw std::runtime_error("detector: model " + cfg.model_path + " holds no network");
-  int backend, target;
-  if (device.backend == "opencv") backend = cv::dnn::DNN_BACKEND_OPENCV;
-  else if (device.backend == "default") backend = cv::dnn::DNN_BACKEND_DEFAULT;
-  else throw std::runtime_error("detector: unknown dnn backend '" + device.backend + "' (opencv, default)");
-  if (device.target == "cpu") target = cv::dnn::DNN_TARGET_CPU;
-  else if (device.target == "opencl") target = cv::dnn::DNN_TARGET_OPENCL;
-  else if (device.target == "opencl_fp16") target = cv::dnn::DNN_TARGET_OPENCL_FP16;
-  else throw std::runtime_error("detector: unknown dnn target '" + device.target + "' (cpu, opencl, opencl_fp16)");
+  int backend = cv::dnn::DNN_BACKEND_OPENCV, target = cv::dnn::DNN_TARGET_CPU;
+  DnnBackend b = DnnBackend::OpenCv;
+  DnnTarget t = DnnTarget::Cpu;
+  try {
+    b = parseDnnBackend(device.backend);
+  } catch (const std::invalid_argument&) {
+    throw std::runtime_error("detector: unknown dnn backend '" + device.backend + "' (opencv, default)");
+  }
+  try {
+    t = parseDnnTarget(device.target);
+  } catch (const std::invalid_argument&) {
+    throw std::runtime_error("detector: unknown dnn target '" + device.target + "' (cpu, opencl, opencl_fp16)");
+  }
+  switch (b) {
+    case DnnBackend::OpenCv: backend = cv::dnn::DNN_BACKEND_OPENCV; break;
+    case DnnBackend::Default: backend = cv::dnn::DNN_BACKEND_DEFAULT; break;
+  }
+  switch (t) {
+    case DnnTarget::Cpu: target = cv::dnn::DNN_TARGET_CPU; break;
+    case DnnTarget::OpenCl: target = cv::dnn::DNN_TARGET_OPENCL; break;
+    case DnnTarget::OpenClFp16: target = cv::dnn::DNN_TARGET_OPENCL_FP16; break;
+  }
   impl_->net.setPreferableBackend(backend);
   impl_->net.setPreferableTarget(target);
   impl_->out_names = impl_->net.getUnconnectedOutLayersNames();

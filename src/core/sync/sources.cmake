@@ -1,4 +1,5 @@
 # Sources of the core's sync stage (included by CMakeLists.txt).
 set(FM_SYNC_SOURCES
   frame_pacer.cpp
+  frame_sync.cpp
 )

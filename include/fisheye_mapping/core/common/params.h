@@ -4,13 +4,13 @@
 #ifndef FISHEYE_MAPPING_CORE_COMMON_PARAMS_H_
 #define FISHEYE_MAPPING_CORE_COMMON_PARAMS_H_
 
+#include <map>
+#include <set>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
 #include <yaml-cpp/yaml.h>
-
-#include "fisheye_mapping/core/depth/plane_sweep.h"
-#include "fisheye_mapping/core/tsdf/tsdf_map.h"
 
 namespace fisheye_mapping {
 
@@ -25,6 +25,63 @@ class ParamSource {
   virtual bool get(const std::string& key, bool& v) const = 0;
   virtual bool get(const std::string& key, std::string& v) const = 0;
   virtual bool get(const std::string& key, std::vector<double>& v) const = 0;
+  virtual bool get(const std::string& key, std::vector<std::string>& v) const = 0;
+  virtual bool get(const std::string& key, std::map<std::string, std::string>& v) const = 0;
+  /// get() for a float field (read as double).
+  bool get(const std::string& key, float& v) const {
+    double d = v;
+    if (!get(key, d)) return false;
+    v = static_cast<float>(d);
+    return true;
+  }
+};
+
+/// Parameters from an in-memory table (tests, dynamic_reconfigure values):
+/// every value a double, an int, a bool, a string, a list or a map; reading a key with
+/// another type throws std::invalid_argument naming the key (ints read as
+/// doubles too).
+class MapParams : public ParamSource {
+ public:
+  void set(const std::string& key, double v) { d_[key] = v; }
+  void set(const std::string& key, int v) { i_[key] = v; }
+  void set(const std::string& key, bool v) { b_[key] = v; }
+  void set(const std::string& key, const std::string& v) { s_[key] = v; }
+  void set(const std::string& key, const char* v) { s_[key] = v; }
+  void set(const std::string& key, std::vector<double> v) { vd_[key] = std::move(v); }
+  void set(const std::string& key, std::vector<std::string> v) { vs_[key] = std::move(v); }
+  void set(const std::string& key, std::map<std::string, std::string> v) { ms_[key] = std::move(v); }
+  bool get(const std::string& key, double& v) const override {
+    if (auto it = d_.find(key); it != d_.end()) return v = it->second, true;
+    if (auto it = i_.find(key); it != i_.end()) return v = it->second, true;
+    return absent(key);
+  }
+  bool get(const std::string& key, int& v) const override { return find(i_, key, v); }
+  bool get(const std::string& key, bool& v) const override { return find(b_, key, v); }
+  bool get(const std::string& key, std::string& v) const override { return find(s_, key, v); }
+  bool get(const std::string& key, std::vector<double>& v) const override { return find(vd_, key, v); }
+  bool get(const std::string& key, std::vector<std::string>& v) const override { return find(vs_, key, v); }
+  bool get(const std::string& key, std::map<std::string, std::string>& v) const override { return find(ms_, key, v); }
+  using ParamSource::get;
+
+ private:
+  template <class M, class T>
+  bool find(const M& m, const std::string& key, T& v) const {
+    if (auto it = m.find(key); it != m.end()) return v = it->second, true;
+    return absent(key);
+  }
+  bool absent(const std::string& key) const {
+    if (d_.count(key) || i_.count(key) || b_.count(key) || s_.count(key) || vd_.count(key) || vs_.count(key) ||
+        ms_.count(key))
+      throw std::invalid_argument("parameter '" + key + "' has the wrong type");
+    return false;
+  }
+  std::map<std::string, double> d_;
+  std::map<std::string, int> i_;
+  std::map<std::string, bool> b_;
+  std::map<std::string, std::string> s_;
+  std::map<std::string, std::vector<double>> vd_;
+  std::map<std::string, std::vector<std::string>> vs_;
+  std::map<std::string, std::map<std::string, std::string>> ms_;
 };
 
 /// Parameters from a YAML map (e.g. one stage's section of config/vehicle.yaml).
@@ -36,6 +93,9 @@ class YamlParams : public ParamSource {
   bool get(const std::string& key, bool& v) const override { return read(key, v); }
   bool get(const std::string& key, std::string& v) const override { return read(key, v); }
   bool get(const std::string& key, std::vector<double>& v) const override { return read(key, v); }
+  bool get(const std::string& key, std::vector<std::string>& v) const override { return read(key, v); }
+  bool get(const std::string& key, std::map<std::string, std::string>& v) const override { return read(key, v); }
+  using ParamSource::get;
 
  private:
   template <class T>
@@ -52,11 +112,37 @@ class YamlParams : public ParamSource {
   std::string origin_;
 };
 
-/// Plane-sweep configuration from the parameter names of config/plane_sweep_depth.yaml
-/// (filters as in cfg/PlaneSweepFilters.cfg), over the core defaults; validated.
-PlaneSweepConfig planeSweepConfigFrom(const ParamSource& p);
+/// Passes every get() on to an inner source (or answers nothing without one)
+/// and records each name asked for: which parameters a fromParams() reads, so
+/// that unknown names in a file (typos) can be reported instead of ignored.
+class RecordingParams : public ParamSource {
+ public:
+  RecordingParams() = default;
+  explicit RecordingParams(const ParamSource& inner) : inner_(&inner) {}
+  bool get(const std::string& k, double& v) const override { return ask(k, v); }
+  bool get(const std::string& k, int& v) const override { return ask(k, v); }
+  bool get(const std::string& k, bool& v) const override { return ask(k, v); }
+  bool get(const std::string& k, std::string& v) const override { return ask(k, v); }
+  bool get(const std::string& k, std::vector<double>& v) const override { return ask(k, v); }
+  bool get(const std::string& k, std::vector<std::string>& v) const override { return ask(k, v); }
+  bool get(const std::string& k, std::map<std::string, std::string>& v) const override { return ask(k, v); }
+  using ParamSource::get;
+  /// The names asked for so far.
+  const std::set<std::string>& asked() const { return asked_; }
 
-/// TSDF configuration from the parameter names of config/tsdf_fusion.yaml; validated.
+ private:
+  template <class T>
+  bool ask(const std::string& k, T& v) const {
+    asked_.insert(k);
+    return inner_ && inner_->get(k, v);
+  }
+  const ParamSource* inner_ = nullptr;
+  mutable std::set<std::string> asked_;  // a record of reads, not state of the source
+};
+
+// Transitional: TSDF configuration from its parameter names (moves to
+// TsdfConfig::fromParams with the TSDF split).
+struct TsdfConfig;
 TsdfConfig tsdfConfigFrom(const ParamSource& p);
 
 }  // namespace fisheye_mapping

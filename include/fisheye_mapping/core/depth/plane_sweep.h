@@ -40,10 +40,24 @@
 #include <opencv2/core.hpp>
 
 #include "fisheye_mapping/core/camera/camera_model.h"
+#include "fisheye_mapping/core/common/params.h"
 #include "fisheye_mapping/core/depth/plane_sweep_shared.h"
 #include "fisheye_mapping/core/camera/rig.h"
 
 namespace fisheye_mapping {
+
+// The enumerated parameters of PlaneSweepConfig, each parsed once from its
+// parameter string (parseX throws std::invalid_argument naming the parameter,
+// the allowed values and the bad one) and printed back by toString.
+enum class SweepAggregation { Average, BestK };           // "average" | "best_k"
+enum class SweepResolution { Full, Half, Multiscale };    // "full" | "half" | "multiscale"
+enum class SweepBackendType { Auto, Native, OpenCl, Cpu };  // "auto" | "native" | "opencl" | "cpu"
+SweepAggregation parseSweepAggregation(const std::string& s);
+SweepResolution parseSweepResolution(const std::string& s);
+SweepBackendType parseSweepBackend(const std::string& s);
+std::string toString(SweepAggregation a);
+std::string toString(SweepResolution r);
+std::string toString(SweepBackendType b);
 
 struct DepthFilterConfig {
   // Texture: drop pixels with too little texture to correlate: the matching
@@ -67,6 +81,13 @@ struct DepthFilterConfig {
   double delta = 0.3;
   // Throws std::invalid_argument naming the field.
   void validate() const;
+  // `base` overlaid with the parameters filter_texture, min_texture_snr,
+  // min_noise_std, filter_cost, alpha_upper, alpha_lower, split_row,
+  // filter_uniqueness, max_ratio, filter_consistency, consistency_window,
+  // gamma and delta (the names of cfg/PlaneSweepFilters.cfg, which the
+  // reconfigure callback passes through here too); validated.
+  static DepthFilterConfig fromParams(const ParamSource& p, DepthFilterConfig base);
+  static DepthFilterConfig fromParams(const ParamSource& p) { return fromParams(p, DepthFilterConfig()); }
 };
 
 struct PlaneSweepConfig {
@@ -83,11 +104,11 @@ struct PlaneSweepConfig {
   // Matching.
   int window_full = 9;           // odd window sizes
   int window_half = 7;
-  std::string aggregation = "average";  // "average" | "best_k"
+  SweepAggregation aggregation = SweepAggregation::Average;  // "average" | "best_k"
   int best_k = 2;
   bool subpixel = true;
   // Scales: "full" | "half" | "multiscale".
-  std::string resolution = "multiscale";
+  SweepResolution resolution = SweepResolution::Multiscale;
   double crop_width = 572.0 / 1024.0;   // centre crop, fractions of the full image
   double crop_height = 332.0 / 544.0;
   // Supporting views: kept when the parallax between the near and far planes
@@ -107,13 +128,17 @@ struct PlaneSweepConfig {
   double min_overlap = 0.2;
   DepthFilterConfig filters;
   // Backend.
-  std::string backend = "auto";    // "auto" | "native" | "opencl" | "cpu"
+  SweepBackendType backend = SweepBackendType::Auto;  // "auto" | "native" | "opencl" | "cpu"
   std::string device;              // OpenCL device (see OpenClContext); "auto" with a
                                    // device set takes "opencl"
   int band_rows = 32;              // rows per work item of the cost kernel (opencl)
                                    // or per band of a thread (native)
   // Throws std::invalid_argument naming the field.
   void validate() const;
+  // The defaults above overlaid with the parameters of the same names in `p`
+  // (filters under the names of cfg/PlaneSweepFilters.cfg; the enumerations
+  // as their strings, parsed here); validated. band_rows is not a parameter.
+  static PlaneSweepConfig fromParams(const ParamSource& p);
 };
 
 // One image to match, with its camera and pose relative to the reference.

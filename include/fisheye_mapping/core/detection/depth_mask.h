@@ -15,6 +15,27 @@
 
 namespace fisheye_mapping {
 
+class ParamSource;
+
+/// The depth mask stage's parameters (the depth mask nodelet's, and the
+/// depth_mask section of the offline tools' configuration).
+struct DepthMaskConfig {
+  double margin_px = 10.0;             ///< boxes grown by this on each side, pixels; >= 0
+  double wait_for_detections = 0.5;    ///< s (wall time) a depth map waits for its detections; >= 0
+  int max_pending = 30;                ///< depth maps / detection sets held while pairing; >= 1
+  double time_reset_threshold = 1.0;   ///< s a stream may step back before the pairing resets; <= 0: never
+  /// Parameter colour_range [near, far]: the colour scale of the colour-coded
+  /// masked depth, metres; 0 < near < far.
+  double colour_near = 1.0;
+  double colour_far = 30.0;
+
+  /// Throws std::invalid_argument naming the field and the bad value.
+  void validate() const;
+  /// The defaults above overlaid with the parameters of the same names in `p`
+  /// (colour_range: a list of two numbers); validated.
+  static DepthMaskConfig fromParams(const ParamSource& p);
+};
+
 /// Sets depth to NaN inside every box grown by `margin_px` on each side, and returns
 /// the mask (CV_8U, 255 where invalidated by a box). A pixel is inside when its centre
 /// is. Boxes refer to an image of `image_w` x `image_h` pixels; they are scaled to the

@@ -13,10 +13,13 @@
 #include <opencv2/core.hpp>
 
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
 namespace fisheye_mapping {
+
+class ParamSource;
 
 /// One detection in image pixels (x right, y down, origin at the top-left pixel's corner).
 struct Detection {
@@ -61,7 +64,8 @@ struct DetectorConfig {
 
 /// Reads a model YAML. Relative paths are relative to the YAML's folder; `~`,
 /// `${VAR}` and `${VAR:-default}` are expanded. Throws std::runtime_error naming
-/// the file and the key for anything missing or malformed.
+/// the file and the key for anything missing or malformed (among them
+/// score_threshold outside (0, 1) and nms_threshold outside (0, 1]).
 DetectorConfig loadDetectorConfig(const std::string& yaml_path);
 
 /// Expands a leading `~`, `${VAR}` and `${VAR:-default}` (nested defaults allowed).
@@ -117,6 +121,43 @@ cv::Mat annotateDetections(const cv::Mat& image, const std::vector<Detection>& d
 struct DnnDevice {
   std::string backend = "opencv";
   std::string target = "cpu";
+};
+
+/// The same as enumerations, parsed once from the parameters dnn_backend and
+/// dnn_target: parseX throws std::invalid_argument naming the parameter, the
+/// allowed values and the bad one; toString gives the name back.
+enum class DnnBackend { OpenCv, Default };           ///< "opencv" | "default"
+enum class DnnTarget { Cpu, OpenCl, OpenClFp16 };    ///< "cpu" | "opencl" | "opencl_fp16"
+DnnBackend parseDnnBackend(const std::string& s);
+DnnTarget parseDnnTarget(const std::string& s);
+std::string toString(DnnBackend b);
+std::string toString(DnnTarget t);
+
+/// The detector stage's parameters (the detector nodelet's, and the detector
+/// section of the offline tools' configuration).
+struct DetectorStageConfig {
+  /// Path of a model YAML (config/detector/*.yaml; loadDetectorConfig). Empty:
+  /// not set (loadModel() throws; the stage runs without a model).
+  std::string model_config;
+  /// Override the model YAML's thresholds when set: score_threshold in (0, 1)
+  /// (as the model YAML's), nms_threshold in (0, 1].
+  std::optional<float> score_threshold;
+  std::optional<float> nms_threshold;
+  DnnBackend dnn_backend = DnnBackend::OpenCv;  ///< parameter dnn_backend: "opencv" | "default"
+  DnnTarget dnn_target = DnnTarget::Cpu;        ///< parameter dnn_target: "cpu" | "opencl" | "opencl_fp16"
+  bool only_moving = true;        ///< publish (and mask) the model's moving classes only
+  bool publish_annotated = true;  ///< also publish the image with the boxes drawn
+
+  /// Throws std::invalid_argument naming the field and the bad value.
+  void validate() const;
+  /// The defaults above overlaid with the parameters of the same names in `p`
+  /// (dnn_backend / dnn_target as their names, parsed here); validated.
+  static DetectorStageConfig fromParams(const ParamSource& p);
+  /// dnn_backend and dnn_target as the Detector takes them.
+  DnnDevice device() const;
+  /// The model YAML (loadDetectorConfig) with the thresholds overridden.
+  /// Throws std::runtime_error when model_config is empty or the YAML is bad.
+  DetectorConfig loadModel() const;
 };
 
 class Detector {

@@ -38,13 +38,44 @@
 
 namespace fisheye_mapping {
 
-enum class SyncPolicy { Exact, Approximate };
+class ParamSource;
 
+enum class SyncPolicy { Exact, Approximate };  // "exact" | "approximate"
+
+/// Throws std::invalid_argument naming the parameter (policy), the allowed
+/// values and the bad one.
 inline SyncPolicy parseSyncPolicy(const std::string& s) {
   if (s == "exact") return SyncPolicy::Exact;
   if (s == "approximate") return SyncPolicy::Approximate;
-  throw std::invalid_argument("sync policy '" + s + "' is neither exact nor approximate");
+  throw std::invalid_argument("policy: must be 'exact' or 'approximate', got '" + s + "'");
 }
+
+inline std::string toString(SyncPolicy p) {
+  switch (p) {
+    case SyncPolicy::Exact: return "exact";
+    case SyncPolicy::Approximate: return "approximate";
+  }
+  return "?";
+}
+
+/// The frame-set sync stage's parameters (the frame sync nodelet's, and the
+/// sync section of config/vehicle.yaml).
+struct FrameSyncConfig {
+  SyncPolicy policy = SyncPolicy::Exact;  ///< parameter policy: "exact" | "approximate"
+  double max_interval = 0.005;            ///< s, approximate policy; >= 0
+  int queue_size = 10;                    ///< open sets; >= 1
+  double silent_warning = 2.0;            ///< s without an image before a camera is reported; > 0
+  double time_reset_threshold = 1.0;      ///< s a camera may step back before the sync resets; <= 0: never
+  /// One image topic per camera, in camera order; empty: the camchain's
+  /// rostopics.
+  std::vector<std::string> image_topics;
+
+  /// Throws std::invalid_argument naming the field and the bad value.
+  void validate() const;
+  /// The defaults above overlaid with the parameters of the same names in `p`
+  /// (policy as its name, parsed here); validated.
+  static FrameSyncConfig fromParams(const ParamSource& p);
+};
 
 /// A stamp in seconds with millisecond digits, for messages ("1234.567").
 inline std::string formatStamp(std::int64_t ns) {

@@ -1,0 +1,71 @@
+// The depth stage of the pipeline (paper Sec. III-A): the rig, the reference
+// camera and its supporting views, the self-masks (the car's own body in each
+// camera) and the plane sweep, as one object that the depth nodelet and the
+// offline FrameSetMapper both call. No ROS.
+#ifndef FISHEYE_MAPPING_CORE_DEPTH_DEPTH_STAGE_H_
+#define FISHEYE_MAPPING_CORE_DEPTH_DEPTH_STAGE_H_
+
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "fisheye_mapping/core/camera/rig.h"
+#include "fisheye_mapping/core/common/params.h"
+#include "fisheye_mapping/core/depth/plane_sweep.h"
+
+namespace fisheye_mapping {
+
+struct DepthStageConfig {
+  std::string reference_camera = "cam0";
+  // Supporting cameras by name; empty: every camera of the rig but the reference.
+  std::vector<std::string> support_cameras;
+  // Camera name -> path of an 8-bit mask image (0 where the camera sees the
+  // car itself; those pixels are never matched).
+  std::map<std::string, std::string> self_masks;
+  PlaneSweepConfig sweep;
+  // Throws std::invalid_argument naming the field.
+  void validate() const;
+  // The defaults above overlaid with the parameters reference_camera,
+  // support_cameras, self_masks and the plane sweep's (PlaneSweepConfig::fromParams);
+  // validated.
+  static DepthStageConfig fromParams(const ParamSource& p);
+};
+
+class DepthStage {
+ public:
+  // Resolves the camera names against the rig and reads the self-masks.
+  // Throws CalibrationError naming the parameter (~reference_camera,
+  // ~support_cameras, ~self_masks) when a camera is not in the rig or a mask
+  // cannot be read.
+  DepthStage(Rig rig, const DepthStageConfig& config);
+
+  // Depth (range along the reference camera's rays, metres, NaN invalid) for
+  // one frame set: images[i] is the image of rig camera i (grey or BGR, 8/16
+  // bit or float); a missing supporting image (empty Mat) is left out and
+  // named in DepthResult::warnings; a missing reference image throws
+  // std::invalid_argument. Not thread-safe (one call at a time).
+  DepthResult compute(const std::vector<cv::Mat>& images);
+
+  // Changes the filters of the sweep (dynamic reconfiguration); validated.
+  void setFilters(const DepthFilterConfig& filters) { sweep_->setFilters(filters); }
+
+  const Rig& rig() const { return rig_; }
+  int reference() const { return ref_; }
+  const std::vector<int>& supports() const { return supports_; }
+  const PlaneSweepConfig& sweepConfig() const { return sweep_->config(); }
+  std::string backendName() const { return sweep_->backendName(); }
+
+ private:
+  Rig rig_;
+  int ref_ = 0;
+  std::vector<int> supports_;
+  std::vector<cv::Mat> masks_;  // per rig camera; empty: none
+  std::unique_ptr<PlaneSweep> sweep_;
+};
+
+}  // namespace fisheye_mapping
+
+#endif  // FISHEYE_MAPPING_CORE_DEPTH_DEPTH_STAGE_H_

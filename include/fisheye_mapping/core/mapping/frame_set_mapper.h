@@ -1,0 +1,106 @@
+// The mapping pipeline for one frame set at a time (paper Sec. III): depth of
+// the reference camera (DepthStage), moving objects found (Detector) or given
+// (e.g. a drive's ground-truth boxes) and masked out (maskDepthBoxes), and the
+// masked depth fused into the TSDF (TsdfMap, TsdfMesher), with per-stage
+// timings. The offline tools (offline_mapper, the evaluation) run it; the
+// nodelets run the same stage objects with the same configs, one stage each,
+// so that what the evaluation measures is what vehicle.launch runs. No ROS.
+#ifndef FISHEYE_MAPPING_CORE_MAPPING_FRAME_SET_MAPPER_H_
+#define FISHEYE_MAPPING_CORE_MAPPING_FRAME_SET_MAPPER_H_
+
+#include <memory>
+#include <optional>
+#include <vector>
+
+#include <Eigen/Geometry>
+#include <opencv2/core.hpp>
+
+#include "fisheye_mapping/core/common/params.h"
+#include "fisheye_mapping/core/depth/depth_stage.h"
+#include "fisheye_mapping/core/detection/depth_mask.h"
+#include "fisheye_mapping/core/detection/detector.h"
+#include "fisheye_mapping/core/tsdf/tsdf_map.h"
+#include "fisheye_mapping/core/tsdf/tsdf_mesher.h"
+
+namespace fisheye_mapping {
+
+struct FrameSetMapperConfig {
+  DepthStageConfig depth;
+  DetectorStageConfig detection;
+  DepthMaskConfig mask;
+  TsdfConfig tsdf;
+  // The mesh follows the map every mesh_every frame sets (and on finish()):
+  // the same mesh and cloud at the end, for a fraction of the cost.
+  int mesh_every = 10;
+  void validate() const;
+  // Each stage from its own parameters (the sections of the nodelets'
+  // parameters: plane_sweep, detector, depth_mask, tsdf); validated.
+  static FrameSetMapperConfig fromParams(const ParamSource& depth, const ParamSource& detection,
+                                         const ParamSource& mask, const ParamSource& tsdf);
+};
+
+// Boxes of moving objects in an image of image_width x image_height pixels
+// (boxes are scaled to the depth map's size when it differs).
+struct ImageBoxes {
+  std::vector<Detection> boxes;
+  int image_width = 0;
+  int image_height = 0;
+};
+
+struct FrameSetTimings {
+  double depth_ms = 0;   // plane sweep and filters (or the given depth)
+  double detect_ms = 0;  // detector (0 with given boxes)
+  double mask_ms = 0;
+  double fuse_ms = 0;    // TSDF integration and, every mesh_every sets, the mesh update
+  double total_ms = 0;
+};
+
+struct FrameSetResult {
+  DepthResult depth;      // depth.depth: masked range image of the reference camera
+  cv::Mat mask;           // CV_8U, 255 where a box removed depth
+  size_t masked_pixels = 0;
+  IntegrationStats fusion;
+  FrameSetTimings ms;
+};
+
+class FrameSetMapper {
+ public:
+  // `detector` may be null: then process() uses the boxes it is given (none:
+  // nothing masked). Throws what DepthStage, TsdfMap and validate() throw.
+  FrameSetMapper(const Rig& rig, const FrameSetMapperConfig& config, std::unique_ptr<Detector> detector = nullptr);
+
+  // One frame set: images[i] of rig camera i, T_W_B the base's pose in the
+  // world (map) frame at the frame set's stamp. `boxes` are used when there is
+  // no detector. Not thread-safe.
+  FrameSetResult process(const std::vector<cv::Mat>& images, const Eigen::Isometry3d& T_W_B,
+                         const std::optional<ImageBoxes>& boxes = std::nullopt);
+  // The same with a given depth map of the reference camera instead of the
+  // sweep (e.g. ground-truth depth: the evaluation's reference map).
+  FrameSetResult processDepth(cv::Mat depth, const Eigen::Isometry3d& T_W_B,
+                              const std::optional<ImageBoxes>& boxes = std::nullopt);
+  // Brings the mesh up to date with the map (after the last frame set).
+  void finish();
+
+  const Rig& rig() const { return depth_.rig(); }
+  int reference() const { return depth_.reference(); }
+  const FrameSetMapperConfig& config() const { return config_; }
+  const DepthStage& depthStage() const { return depth_; }
+  bool hasDetector() const { return detector_ != nullptr; }
+  TsdfMap& map() { return *map_; }
+  TsdfMesher& mesher() { return mesher_; }
+  size_t frameSets() const { return frame_sets_; }
+
+ private:
+  FrameSetResult maskAndFuse(FrameSetResult r, const cv::Mat& reference_image, const Eigen::Isometry3d& T_W_B,
+                             const std::optional<ImageBoxes>& boxes);
+  FrameSetMapperConfig config_;
+  DepthStage depth_;
+  std::unique_ptr<Detector> detector_;
+  std::unique_ptr<TsdfMap> map_;
+  TsdfMesher mesher_;
+  size_t frame_sets_ = 0;
+};
+
+}  // namespace fisheye_mapping
+
+#endif  // FISHEYE_MAPPING_CORE_MAPPING_FRAME_SET_MAPPER_H_
