@@ -355,7 +355,7 @@ TEST(TsdfMap, SaveThenLoadIsBitIdenticalAndBadFilesChangeNothing) {
 TEST(TsdfMap, OpenClIntegratorAgreesWithCpu) {
   if (OpenClContext::listDevices().empty()) GTEST_SKIP() << "no OpenCL device";
   TsdfConfig cpu_cfg, cl_cfg;
-  cl_cfg.integrator = "opencl";
+  cl_cfg.integrator = TsdfIntegratorKind::kOpenCl;
   TsdfMap cpu(cpu_cfg), cl(cl_cfg);
   const CameraModel cam = smallFisheye();
   const Scene scene = objectsScene();

@@ -80,4 +80,5 @@ fm_add_test(test_reconfigure_params SOURCES test/test_reconfigure_params.cpp LIB
 fm_add_test(test_rig_geometry SOURCES test/test_rig_geometry.cpp)
 fm_add_test(test_frame_set_mapper SOURCES test/test_frame_set_mapper.cpp)
 fm_add_test(test_conversions SOURCES test/test_conversions.cpp LIBS fisheye_mapping_ros)
+fm_add_test(test_mesh_distance SOURCES test/test_mesh_distance.cpp)
 fm_add_test(test_params SOURCES test/test_params.cpp)

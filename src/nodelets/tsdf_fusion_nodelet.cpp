@@ -148,7 +148,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
         throw std::invalid_argument("~save_map_on_shutdown '" + save_on_shutdown_ +
                                     "' is a directory; give a file path (e.g. " + save_on_shutdown_ + "/map.fmtsdf)");
       }
-      cfg = tsdfConfigFrom(RosParams(pnh));
+      cfg = TsdfConfig::fromParams(RosParams(pnh));
       rig_ = loadRigFromParams(pnh);
       map_ = std::make_unique<TsdfMap>(cfg);
     } catch (const std::exception& e) {
@@ -232,7 +232,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     });
     NODELET_INFO("TSDF fusion: voxel %.3f m, truncation %.3f m, local map %.0fx%.0fx%.0f m, %s integrator",
                  cfg.voxel_size, cfg.truncation(), cfg.local_map_size.x(), cfg.local_map_size.y(), cfg.local_map_size.z(),
-                 cfg.integrator.c_str());
+                 toString(cfg.integrator));
   }
 
   // Runs fn; an exception is logged with the last frame's stamp, counted, and

@@ -11,7 +11,7 @@
 // 3. Memory: process peak RSS; with --drive, the resident memory after a drive
 //    of that length with the local map swapping to disk (run it for a short
 //    and a long drive, each in its own process).
-// scripts/benchmark_tsdf runs this and Open3D on the same frames.
+// scripts/bench/benchmark_tsdf runs this and Open3D on the same frames.
 #include <sys/resource.h>
 #include <unistd.h>
 
@@ -193,7 +193,7 @@ int main(int argc, char** argv) {
   }
   try {
     fm::TsdfConfig c = cfg;
-    c.integrator = "opencl";
+    c.integrator = fm::TsdfIntegratorKind::kOpenCl;
     fm::TsdfMap map(c);
     const Timing t = timeIntegration(map, pinhole, frames, poses);
     std::printf("ours pinhole, OpenCL integrator: %.1f ms/frame (median %.1f)\n", t.mean_ms, t.median_ms);

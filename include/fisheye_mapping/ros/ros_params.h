@@ -10,7 +10,6 @@
 #include <ros/node_handle.h>
 
 #include "fisheye_mapping/core/common/params.h"
-#include "fisheye_mapping/core/tsdf/tsdf_map.h"
 #include "fisheye_mapping/core/depth/plane_sweep.h"
 #include "fisheye_mapping/core/camera/rig.h"
 

@@ -1,5 +1,4 @@
 # Sources of the core's common stage (included by CMakeLists.txt).
 set(FM_COMMON_SOURCES
-  params.cpp
   opencl_context.cpp
 )

@@ -11,26 +11,15 @@
 
 namespace fisheye_mapping {
 
-namespace {
-
-void require(bool ok, const std::string& field, const std::string& what, double value) {
-  if (ok) return;
-  std::ostringstream s;
-  s << field << ": " << what << ", got " << value;
-  throw std::invalid_argument(s.str());
-}
-
-}  // namespace
-
 void DepthMaskConfig::validate() const {
-  require(std::isfinite(margin_px) && margin_px >= 0, "margin_px", "must be >= 0 pixels", margin_px);
-  require(std::isfinite(wait_for_detections) && wait_for_detections >= 0, "wait_for_detections",
+  requireField(std::isfinite(margin_px) && margin_px >= 0, "margin_px", "must be >= 0 pixels", margin_px);
+  requireField(std::isfinite(wait_for_detections) && wait_for_detections >= 0, "wait_for_detections",
           "must be >= 0 seconds", wait_for_detections);
-  require(max_pending >= 1, "max_pending", "must be at least 1", max_pending);
-  require(!std::isnan(time_reset_threshold), "time_reset_threshold", "must be a number of seconds (<= 0: never)",
+  requireField(max_pending >= 1, "max_pending", "must be at least 1", max_pending);
+  requireField(!std::isnan(time_reset_threshold), "time_reset_threshold", "must be a number of seconds (<= 0: never)",
           time_reset_threshold);
-  require(std::isfinite(colour_near) && colour_near > 0, "colour_range", "near must be positive", colour_near);
-  require(std::isfinite(colour_far) && colour_far > colour_near, "colour_range", "far must be greater than near",
+  requireField(std::isfinite(colour_near) && colour_near > 0, "colour_range", "near must be positive", colour_near);
+  requireField(std::isfinite(colour_far) && colour_far > colour_near, "colour_range", "far must be greater than near",
           colour_far);
 }
 

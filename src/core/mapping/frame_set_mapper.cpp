@@ -26,7 +26,7 @@ FrameSetMapperConfig FrameSetMapperConfig::fromParams(const ParamSource& depth, 
   c.depth = DepthStageConfig::fromParams(depth);
   c.detection = DetectorStageConfig::fromParams(detection);
   c.mask = DepthMaskConfig::fromParams(mask);
-  c.tsdf = tsdfConfigFrom(tsdf);
+  c.tsdf = TsdfConfig::fromParams(tsdf);
   c.validate();
   return c;
 }

@@ -6,25 +6,14 @@
 
 namespace fisheye_mapping {
 
-namespace {
-
-void require(bool ok, const std::string& field, const std::string& what, double value) {
-  if (ok) return;
-  std::ostringstream s;
-  s << field << ": " << what << ", got " << value;
-  throw std::invalid_argument(s.str());
-}
-
-}  // namespace
-
 void FrameSyncConfig::validate() const {
   if (toString(policy) == "?")
     throw std::invalid_argument("policy: not a sync policy (" + std::to_string(static_cast<int>(policy)) + ")");
-  require(std::isfinite(max_interval) && max_interval >= 0, "max_interval", "must be >= 0 seconds", max_interval);
-  require(queue_size >= 1, "queue_size", "must be at least 1", queue_size);
-  require(std::isfinite(silent_warning) && silent_warning > 0, "silent_warning", "must be positive seconds",
+  requireField(std::isfinite(max_interval) && max_interval >= 0, "max_interval", "must be >= 0 seconds", max_interval);
+  requireField(queue_size >= 1, "queue_size", "must be at least 1", queue_size);
+  requireField(std::isfinite(silent_warning) && silent_warning > 0, "silent_warning", "must be positive seconds",
           silent_warning);
-  require(!std::isnan(time_reset_threshold), "time_reset_threshold", "must be a number of seconds (<= 0: never)",
+  requireField(!std::isnan(time_reset_threshold), "time_reset_threshold", "must be a number of seconds (<= 0: never)",
           time_reset_threshold);
   for (size_t i = 0; i < image_topics.size(); ++i) {
     if (image_topics[i].empty())

@@ -4,7 +4,11 @@
 
 namespace fisheye_mapping {
 
-TsdfIntegratorCl::TsdfIntegratorCl(const std::string& device) : ctx_(device) {
+TsdfIntegratorCl::TsdfIntegratorCl(const TsdfConfig& config)
+    : voxel_size_(static_cast<float>(config.voxel_size)),
+      mu_(static_cast<float>(config.truncation())),
+      max_weight_(config.max_weight),
+      ctx_(config.opencl_device) {
   cl::Program& program = ctx_.program(
       {clSource("camera_model_shared.h"), clSource("tsdf_shared.h"), clSource("tsdf_integrate.cl")});
   kernel_ = cl::Kernel(program, "integrate_blocks");
@@ -18,10 +22,8 @@ void TsdfIntegratorCl::reserve(cl::Buffer* buffer, size_t* capacity, size_t byte
   *buffer = cl::Buffer(ctx_.context(), flags, *capacity);
 }
 
-void TsdfIntegratorCl::integrate(const std::vector<std::pair<BlockIndex, VoxelBlock*>>& blocks,
-                                 const cv::Mat& depth, const FmCameraT<float>& camera,
-                                 const float T_C_W[12], float voxel_size, float mu, float max_weight,
-                                 std::vector<char>* changed) {
+void TsdfIntegratorCl::integrate(const BlockWork& blocks, const cv::Mat& depth, const FmCameraT<float>& camera,
+                                 const float T_C_W[12], std::vector<char>* changed) {
   const size_t n = blocks.size();
   changed->assign(n, 0);
   if (n == 0) return;
@@ -49,9 +51,9 @@ void TsdfIntegratorCl::integrate(const std::vector<std::pair<BlockIndex, VoxelBl
   kernel_.setArg(2, depth_);
   kernel_.setArg(3, camera_);
   kernel_.setArg(4, pose_);
-  kernel_.setArg(5, voxel_size);
-  kernel_.setArg(6, mu);
-  kernel_.setArg(7, max_weight);
+  kernel_.setArg(5, voxel_size_);
+  kernel_.setArg(6, mu_);
+  kernel_.setArg(7, max_weight_);
   kernel_.setArg(8, changed_);
   q.enqueueNDRangeKernel(kernel_, cl::NullRange, cl::NDRange(n * FM_BLOCK_VOXELS), cl::NDRange(64));
   q.enqueueReadBuffer(voxels_, CL_FALSE, 0, voxel_bytes, staging_.data());

@@ -1,5 +1,5 @@
-// TsdfMap files: save (atomic, checksummed), load (validated before anything
-// is replaced), readHeader, and the CRC-32 they use.
+// TSDF map files: save (atomic, checksummed), load (validated before anything
+// is replaced), readMapFileHeader. The CRC-32 is block_store.h's.
 //
 // Layout, little-endian (version 2, written now):
 //   0  char[8]  "FMTSDF01"
@@ -13,7 +13,7 @@
 //      weight} (x fastest); uint32 CRC-32 of the record's first 4108 bytes
 // Version 1 (read only): the first 36 bytes (version = 1), then N records of
 // index + voxels without a CRC.
-#include "fisheye_mapping/core/tsdf/tsdf_map.h"
+#include "fisheye_mapping/core/tsdf/tsdf_io.h"
 
 #include <fcntl.h>
 #include <sys/stat.h>
@@ -24,8 +24,11 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <sstream>
 #include <stdexcept>
+#include <unordered_map>
+#include <vector>
 
 namespace fisheye_mapping {
 namespace {
@@ -43,18 +46,6 @@ constexpr float kTsdfSlack = 1e-4f;  // rounding of the running average
 
 static_assert(sizeof(FmVoxel) == 8, "map files store 8-byte voxels");
 static_assert(sizeof(VoxelBlock::voxels) == 4096, "map files store 512 voxels per block");
-
-struct CrcTable {
-  uint32_t t[256];
-  constexpr CrcTable() : t() {
-    for (uint32_t i = 0; i < 256; ++i) {
-      uint32_t c = i;
-      for (int k = 0; k < 8; ++k) c = (c & 1) ? 0xEDB88320u ^ (c >> 1) : c >> 1;
-      t[i] = c;
-    }
-  }
-};
-constexpr CrcTable kCrc;
 
 std::string blockName(uint64_t ordinal, const BlockIndex& b) {
   std::ostringstream s;
@@ -133,7 +124,7 @@ std::string holdsData(const std::string& path) {
   std::error_code ec;
   if (!std::filesystem::exists(path, ec)) return "";
   try {
-    const MapFileInfo info = TsdfMap::readHeader(path);
+    const MapFileInfo info = readMapFileHeader(path);
     if (info.num_blocks == 0) return "";
     return "it holds a map of " + std::to_string(info.num_blocks) + " blocks";
   } catch (const std::exception& e) {
@@ -143,14 +134,7 @@ std::string holdsData(const std::string& path) {
 
 }  // namespace
 
-uint32_t crc32(const void* data, size_t size, uint32_t crc) {
-  const unsigned char* p = static_cast<const unsigned char*>(data);
-  uint32_t c = ~crc;
-  for (size_t i = 0; i < size; ++i) c = kCrc.t[(c ^ p[i]) & 0xFFu] ^ (c >> 8);
-  return ~c;
-}
-
-MapFileInfo TsdfMap::readHeader(const std::string& path) {
+MapFileInfo readMapFileHeader(const std::string& path) {
   std::error_code ec;
   if (std::filesystem::is_directory(path, ec)) fail(path, "is a directory, not a map file");
   std::ifstream f(path, std::ios::binary);
@@ -162,12 +146,13 @@ MapFileInfo TsdfMap::readHeader(const std::string& path) {
   return parseHeader(path, header, static_cast<size_t>(f.gcount()), size);
 }
 
-void TsdfMap::load(const std::string& path) {
-  const MapFileInfo info = readHeader(path);
-  if (info.voxel_size != config_.voxel_size || info.truncation_voxels != config_.truncation_voxels) {
+void loadMapFile(BlockStore& store, const std::string& path) {
+  const TsdfConfig& config = store.config();
+  const MapFileInfo info = readMapFileHeader(path);
+  if (info.voxel_size != config.voxel_size || info.truncation_voxels != config.truncation_voxels) {
     std::ostringstream msg;
     msg << "map has voxel_size " << info.voxel_size << " and truncation_voxels " << info.truncation_voxels
-        << ", the node is configured with " << config_.voxel_size << " and " << config_.truncation_voxels;
+        << ", the node is configured with " << config.voxel_size << " and " << config.truncation_voxels;
     fail(path, msg.str());
   }
   const bool v2 = info.version == 2;
@@ -188,13 +173,13 @@ void TsdfMap::load(const std::string& path) {
         << " bytes): block count damaged or bytes appended";
     fail(path, msg.str());
   }
-  const float max_weight = v2 ? info.max_weight : config_.max_weight;
-  const double block_size = config_.blockSize();
+  const float max_weight = v2 ? info.max_weight : config.max_weight;
+  const double block_size = config.blockSize();
 
   // Read and check everything before touching the map.
   std::ifstream f(path, std::ios::binary);
   f.seekg(static_cast<std::streamoff>(header));
-  std::unordered_map<BlockIndex, std::unique_ptr<VoxelBlock>, BlockIndexHash> loaded;
+  BlockMap loaded;
   std::unordered_map<BlockIndex, uint64_t, BlockIndexHash> ordinal;
   loaded.reserve(info.num_blocks);
   std::vector<char> buf(record);
@@ -233,22 +218,17 @@ void TsdfMap::load(const std::string& path) {
     loaded.emplace(b, std::move(block));
   }
 
-  clear();
-  for (auto& kv : loaded) {
-    changed_.insert(kv.first);
-    active_[kv.first] = std::move(kv.second);
-    if (!insideLocalMap(kv.first)) swapOut(kv.first);
-  }
+  store.replaceAll(std::move(loaded));
 }
 
-void TsdfMap::save(const std::string& path, const MapSaveOptions& options) const {
+void saveMapFile(BlockStore& store, const std::string& path, const MapSaveOptions& options) {
   namespace fs = std::filesystem;
   if (path.empty()) throw std::runtime_error("cannot save the map: empty path");
   std::error_code ec;
   const fs::file_status st = fs::status(path, ec);
   if (fs::is_directory(st)) fail(path, "is a directory; give the map a file path (e.g. " + path + "/map.fmtsdf)");
   if (fs::exists(st) && !fs::is_regular_file(st)) fail(path, "exists and is not a regular file");
-  if (options.refuse_empty_overwrite && numBlocks() == 0) {
+  if (options.refuse_empty_overwrite && store.numBlocks() == 0) {
     const std::string why = holdsData(path);
     if (!why.empty()) fail(path, "refusing to replace it by an empty map: " + why);
   }
@@ -266,30 +246,11 @@ void TsdfMap::save(const std::string& path, const MapSaveOptions& options) const
   buf.reserve(256 * kRecordV2);
   uint64_t n = 0;
   VoxelBlock from_disk;
-  for (const BlockIndex& b : allBlocks()) {
-    const VoxelBlock* blk = nullptr;
-    auto a = active_.find(b);
-    if (a != active_.end()) {
-      blk = a->second.get();
-    } else {
-      auto s = swapped_.find(b);
-      if (s == swapped_.end()) continue;
-      if (s->second) {
-        blk = s->second.get();
-      } else {
-        auto c = disk_cache_.find(b);
-        if (c != disk_cache_.end()) {
-          blk = c->second.get();
-        } else {
-          std::string why;
-          if (!readSwapFile(b, &from_disk, &why)) {
-            markLost(b, why);  // saved without it
-            continue;
-          }
-          blk = &from_disk;
-        }
-      }
-    }
+  for (const BlockIndex& b : store.allBlocks()) {
+    // Resident, cached, or read from its swap file into from_disk; nullptr
+    // when that file is unreadable (the block is lost: saved without it).
+    const VoxelBlock* blk = store.fetchInto(b, &from_disk);
+    if (!blk) continue;
     const int32_t idx[3] = {b.x(), b.y(), b.z()};
     const size_t at = buf.size();
     buf.resize(at + kRecordV2);
@@ -310,8 +271,8 @@ void TsdfMap::save(const std::string& path, const MapSaveOptions& options) const
   }
 
   std::memcpy(header, kMagic, sizeof(kMagic));
-  const double vs = config_.voxel_size, tr = config_.truncation_voxels;
-  const float mw = config_.max_weight;
+  const double vs = store.config().voxel_size, tr = store.config().truncation_voxels;
+  const float mw = store.config().max_weight;
   std::memcpy(header + 8, &kVersion, 4);
   std::memcpy(header + 12, &vs, 8);
   std::memcpy(header + 20, &tr, 8);

@@ -6,6 +6,8 @@
 #include <pcl/io/ply_io.h>
 #include <pcl/surface/marching_cubes.h>  // Bourke's edge and triangle tables
 
+#include <omp.h>
+
 #include <array>
 
 namespace fisheye_mapping {
@@ -32,7 +34,7 @@ BlockOutput TsdfMesher::computeBlock(const TsdfMap& map, const BlockIndex& index
   const VoxelBlock* nb[2][2][2];
   for (int dz = 0; dz < 2; ++dz)
     for (int dy = 0; dy < 2; ++dy)
-      for (int dx = 0; dx < 2; ++dx) nb[dz][dy][dx] = map.block(index + BlockIndex(dx, dy, dz));
+      for (int dx = 0; dx < 2; ++dx) nb[dz][dy][dx] = map.store().find(index + BlockIndex(dx, dy, dz));
   if (!nb[0][0][0]) return out;
   const float min_w = static_cast<float>(min_observations_);
   auto at = [&](int i, int j, int k) -> float& { return val[i + N * (j + N * k)]; };
@@ -102,12 +104,16 @@ BlockOutput TsdfMesher::computeBlock(const TsdfMap& map, const BlockIndex& index
 std::vector<BlockIndex> TsdfMesher::recompute(TsdfMap& map, const BlockSet& dirty) {
   std::vector<BlockIndex> list(dirty.begin(), dirty.end());
   // Read every block (and neighbour) once here: blocks swapped to disk are
-  // loaded into the map's cache, so the parallel loop below only reads.
+  // loaded into the store's read cache, so the parallel loop below only makes
+  // const lookups (BlockStore::find, no I/O).
   for (const BlockIndex& b : list) {
     for (int d = 0; d < 8; ++d) map.block(b + BlockIndex(d & 1, (d >> 1) & 1, d >> 2));
   }
   std::vector<BlockOutput> results(list.size());
-#pragma omp parallel for schedule(dynamic, 4)
+  // The map's threads (TsdfConfig::threads, 0: the OpenMP default), as a
+  // clause: the process-wide OpenMP setting is left alone.
+  const int threads = map.config().threads > 0 ? map.config().threads : omp_get_max_threads();
+#pragma omp parallel for num_threads(threads) schedule(dynamic, 4)
   for (size_t n = 0; n < list.size(); ++n) results[n] = computeBlock(map, list[n]);
   map.dropSwapCache();
   for (size_t n = 0; n < list.size(); ++n) {

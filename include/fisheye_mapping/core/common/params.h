@@ -6,6 +6,7 @@
 
 #include <map>
 #include <set>
+#include <sstream>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -112,6 +113,15 @@ class YamlParams : public ParamSource {
   std::string origin_;
 };
 
+/// For validate(): throws std::invalid_argument "<field>: <what>, got <value>"
+/// unless `ok`.
+inline void requireField(bool ok, const std::string& field, const std::string& what, double value) {
+  if (ok) return;
+  std::ostringstream s;
+  s << field << ": " << what << ", got " << value;
+  throw std::invalid_argument(s.str());
+}
+
 /// Passes every get() on to an inner source (or answers nothing without one)
 /// and records each name asked for: which parameters a fromParams() reads, so
 /// that unknown names in a file (typos) can be reported instead of ignored.
@@ -140,10 +150,6 @@ class RecordingParams : public ParamSource {
   mutable std::set<std::string> asked_;  // a record of reads, not state of the source
 };
 
-// Transitional: TSDF configuration from its parameter names (moves to
-// TsdfConfig::fromParams with the TSDF split).
-struct TsdfConfig;
-TsdfConfig tsdfConfigFrom(const ParamSource& p);
 
 }  // namespace fisheye_mapping
 

@@ -1,37 +1,34 @@
-// OpenCL integration of the voxels of the blocks a frame touched: the same
-// per-voxel function as the C++ loop (tsdf_shared.h), one work item per voxel.
+// OpenCL TSDF integration: the same per-voxel function as the CPU loop
+// (tsdf_shared.h, kernel in tsdf_integrate.cl), one work item per voxel of
+// the touched blocks, which are copied to the device and back each frame.
 // Buffers are kept and grown frame to frame; the program is built once.
-// Not thread-safe.
+// Not thread-safe (see TsdfIntegrator).
 #ifndef FISHEYE_MAPPING_CORE_TSDF_TSDF_INTEGRATOR_CL_H_
 #define FISHEYE_MAPPING_CORE_TSDF_TSDF_INTEGRATOR_CL_H_
 
-#include <memory>
 #include <string>
-#include <utility>
 #include <vector>
 
-#include <opencv2/core.hpp>
-
 #include "fisheye_mapping/core/common/opencl_context.h"
-#include "fisheye_mapping/core/tsdf/tsdf_map.h"
+#include "fisheye_mapping/core/tsdf/tsdf_integrator.h"
 
 namespace fisheye_mapping {
 
-class TsdfIntegratorCl {
+class TsdfIntegratorCl : public TsdfIntegrator {
  public:
-  // device: as OpenClContext. Throws OpenClError when no device matches.
-  explicit TsdfIntegratorCl(const std::string& device = "");
+  // On config.opencl_device (as OpenClContext). Throws OpenClError when no
+  // device matches or the program does not build.
+  explicit TsdfIntegratorCl(const TsdfConfig& config);
+  TsdfIntegratorKind kind() const override { return TsdfIntegratorKind::kOpenCl; }
   const std::string& deviceName() const { return ctx_.deviceName(); }
 
-  // Integrates `depth` (CV_32FC1, continuous) into the given blocks; sets
-  // changed[n] for each block whose voxels changed.
-  void integrate(const std::vector<std::pair<BlockIndex, VoxelBlock*>>& blocks, const cv::Mat& depth,
-                 const FmCameraT<float>& camera, const float T_C_W[12], float voxel_size, float mu,
-                 float max_weight, std::vector<char>* changed);
+  void integrate(const BlockWork& blocks, const cv::Mat& depth, const FmCameraT<float>& camera,
+                 const float T_C_W[12], std::vector<char>* changed) override;
 
  private:
   void reserve(cl::Buffer* buffer, size_t* capacity, size_t bytes, cl_mem_flags flags);
 
+  float voxel_size_, mu_, max_weight_;  // metres, metres, observations
   OpenClContext ctx_;
   cl::Kernel kernel_;
   cl::Buffer voxels_, coords_, depth_, camera_, pose_, changed_;

@@ -1,71 +1,42 @@
-// TSDF map of fisheye depth (paper Sec. III-C): voxel blocks of 8^3 voxels in
-// a spatial hash, allocated along each valid pixel's ray within the truncation
-// band, integrated with the fisheye camera model, and kept as a local map: the
-// blocks inside a box around the vehicle are active, the others are swapped out
-// to a store in host memory (or on disk) and swapped back when needed. Nothing
-// fused is lost by swapping, unless a swap file is deleted or damaged behind
-// the map's back: that block is then dropped ("lost"), counted and reported
-// once through the swap-error callback, and the map goes on without it. A swap
-// file that cannot be written keeps its block in RAM (counted, reported).
+// TSDF map of fisheye depth (paper Sec. III-C): a facade over the three parts
+// (voxblox / InfiniTAM ITMLib style), kept for the callers of one object:
+//   BlockStore      (block_store.h): voxel blocks of 8^3 voxels in a spatial
+//                   hash, allocation, the local-map window and swapping of
+//                   the blocks outside it to host memory or disk;
+//   TsdfIntegrator  (tsdf_integrator.h): the voxel update, on the CPU
+//                   (OpenMP) or with OpenCL, chosen by TsdfConfig::integrator;
+//   map files       (tsdf_io.h): save / load / readHeader.
+// integrate() adds what joins them: the blocks each valid pixel's ray crosses
+// within the truncation band (the rays of each camera computed once), which
+// the store allocates and the integrator fuses with the fisheye camera model.
 //
-// Not thread-safe: call from one thread (integration itself uses all cores).
+// Units and frames: metres; the world frame (W) for poses, block indices and
+// voxel centres; depth is range along each pixel's ray.
+//
+// Thread-safety: not thread-safe; call every method from one thread at a time
+// (integration itself runs TsdfConfig::threads threads: 0 = the OpenMP
+// default). The const methods that read swapped blocks (block, voxel) are
+// const for existing callers only: see block().
 #ifndef FISHEYE_MAPPING_CORE_TSDF_TSDF_MAP_H_
 #define FISHEYE_MAPPING_CORE_TSDF_TSDF_MAP_H_
 
-#include <array>
 #include <cstdint>
-#include <functional>
 #include <memory>
 #include <string>
-#include <unordered_map>
-#include <unordered_set>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Geometry>
 #include <opencv2/core.hpp>
 
 #include "fisheye_mapping/core/camera/camera_model.h"
+#include "fisheye_mapping/core/tsdf/block_store.h"
+#include "fisheye_mapping/core/tsdf/tsdf_config.h"
+#include "fisheye_mapping/core/tsdf/tsdf_integrator.h"
+#include "fisheye_mapping/core/tsdf/tsdf_io.h"
 #include "fisheye_mapping/core/tsdf/tsdf_shared.h"
 
 namespace fisheye_mapping {
-
-struct TsdfConfig {
-  double voxel_size = 0.05;        // metres
-  double truncation_voxels = 4.0;  // mu = truncation_voxels * voxel_size
-  float max_weight = 100.0f;       // cap of the per-voxel observation count
-  int min_observations = 3;        // outputs keep voxels observed at least this often
-  double max_range = 0.0;          // depth beyond this many metres is not fused (0: no limit)
-  // Active box around the vehicle (world axes): centre = vehicle + offset.
-  Eigen::Vector3d local_map_size = Eigen::Vector3d(60.0, 60.0, 3.0);
-  Eigen::Vector3d local_map_offset = Eigen::Vector3d(0.0, 0.0, 1.0);
-  std::string swap_directory;  // empty: swapped blocks stay in host memory
-  int threads = 0;             // 0: all cores
-  // Voxel integration: "cpu" (OpenMP loop) or "opencl" (same function as a
-  // kernel, on opencl_device; see OpenClContext for the syntax).
-  std::string integrator = "cpu";
-  std::string opencl_device;
-
-  double truncation() const { return truncation_voxels * voxel_size; }
-  double blockSize() const { return FM_BLOCK_SIDE * voxel_size; }
-  // Throws std::invalid_argument naming the field.
-  void validate() const;
-};
-
-using BlockIndex = Eigen::Vector3i;
-
-struct BlockIndexHash {
-  size_t operator()(const BlockIndex& b) const {
-    return (static_cast<size_t>(b.x()) * 73856093u) ^ (static_cast<size_t>(b.y()) * 19349669u) ^
-           (static_cast<size_t>(b.z()) * 83492791u);
-  }
-};
-
-struct VoxelBlock {
-  std::array<FmVoxel, FM_BLOCK_VOXELS> voxels{};  // x fastest: i + 8 j + 64 k
-  static int linear(int i, int j, int k) { return i + FM_BLOCK_SIDE * (j + FM_BLOCK_SIDE * k); }
-};
-
-using BlockSet = std::unordered_set<BlockIndex, BlockIndexHash>;
 
 struct IntegrationStats {
   size_t valid_pixels = 0;
@@ -79,133 +50,109 @@ struct IntegrationStats {
   size_t blocks_lost = 0;     // swapped blocks whose file could not be read back (dropped)
 };
 
-// Map file (see tsdf_io.cpp for the layout). Version 2 (written now) carries
-// max_weight, a CRC32 of the header and one per block; version 1 (no
-// checksums) is still read.
-struct MapFileInfo {
-  uint32_t version = 0;
-  double voxel_size = 0, truncation_voxels = 0;
-  float max_weight = 0;  // 0: not stored (version 1)
-  uint64_t num_blocks = 0;
-  uint64_t file_size = 0;
-};
-
-struct MapSaveOptions {
-  // Keep an existing file at the path as <path>.1 (replacing an older .1).
-  bool keep_previous = false;
-  // Refuse (throw, nothing written) to replace a file holding blocks (or one
-  // that is not a readable map) by a map with no blocks.
-  bool refuse_empty_overwrite = false;
-};
-
-// CRC-32 (IEEE 802.3, zlib's crc32): crc32("123456789") == 0xCBF43926.
-// Chain by passing the previous value as `crc`.
-uint32_t crc32(const void* data, size_t size, uint32_t crc = 0);
-
 class TsdfMap {
  public:
+  // Validates the config (std::invalid_argument naming the field), creates
+  // the swap directory if set, and makes the integrator (OpenClError when
+  // "opencl" finds no device).
   explicit TsdfMap(const TsdfConfig& config = TsdfConfig());
   ~TsdfMap();
+  TsdfMap(const TsdfMap&) = delete;
+  TsdfMap& operator=(const TsdfMap&) = delete;
 
   const TsdfConfig& config() const { return config_; }
 
   // Fuses one depth map: CV_32FC1, the camera's resolution, metres of range
   // along each pixel's ray, NaN (or <= 0, or inf) where invalid. T_W_C is the
-  // camera pose in the world; vehicle_W the vehicle position, which places the
-  // local map (blocks leaving it are swapped out after the update). Throws
-  // std::invalid_argument (map untouched) for a wrong encoding or size, or a
-  // non-finite pose.
+  // camera pose in the world; vehicle_W the vehicle position (world, metres),
+  // which places the local map (blocks leaving it are swapped out after the
+  // update). Throws std::invalid_argument (map untouched) for a wrong
+  // encoding or size, or a non-finite pose.
   IntegrationStats integrate(const cv::Mat& depth, const CameraModel& camera,
                              const Eigen::Isometry3d& T_W_C, const Eigen::Vector3d& vehicle_W);
 
-  // Moves the local map to the vehicle: active blocks outside the new box are
-  // swapped out, stored blocks inside it swapped back in. Returns the number of
-  // blocks swapped out.
-  size_t moveLocalMap(const Eigen::Vector3d& vehicle_W);
-  bool insideLocalMap(const BlockIndex& block) const;
+  // Moves the local map to the vehicle (world, metres): active blocks outside
+  // the new box are swapped out, stored blocks inside it swapped back in.
+  // Returns the number of blocks swapped out.
+  size_t moveLocalMap(const Eigen::Vector3d& vehicle_W) { return store_->moveLocalMap(vehicle_W); }
+  bool insideLocalMap(const BlockIndex& block) const { return store_->insideLocalMap(block); }
 
-  // Voxel at a global voxel index from either store, or nullptr.
+  // Block from either store (a swapped block on disk is read into the
+  // store's read cache), or nullptr. A disk-swapped block whose file cannot
+  // be read (missing, short, checksum) is dropped from the map and reported
+  // as lost; nullptr then. Never throws for swap I/O. Valid until the next
+  // call of a non-const method other than block()/voxel().
+  const VoxelBlock* block(const BlockIndex& index) { return store_->fetch(index); }
+  // The same for callers holding a const map: logically const only, since
+  // it may fill the store's read cache and drop a lost block like the
+  // non-const overload (which new code should use; BlockStore::find() is the
+  // truly const lookup, without I/O). Not safe to call concurrently.
+  const VoxelBlock* block(const BlockIndex& index) const { return store_->fetch(index); }
+  // Voxel at a global voxel index (voxel centre = (index + 0.5) * voxel_size,
+  // world frame) from either store, or nullptr; as block().
+  const FmVoxel* voxel(const Eigen::Vector3i& global_voxel);
   const FmVoxel* voxel(const Eigen::Vector3i& global_voxel) const;
-  // Block from either store (a swapped block on disk is read into a cache
-  // owned by the map), or nullptr. A disk-swapped block whose file cannot be
-  // read (missing, short, checksum) is dropped from the map and reported as
-  // lost; nullptr then. Never throws for swap I/O.
-  const VoxelBlock* block(const BlockIndex& index) const;
-  bool isActive(const BlockIndex& index) const { return active_.count(index) > 0; }
+  bool isActive(const BlockIndex& index) const { return store_->isActive(index); }
   // Frees the copies of disk-swapped blocks that block() read.
-  void dropSwapCache() const { disk_cache_.clear(); }
+  void dropSwapCache() { store_->dropReadCache(); }
 
-  size_t numActiveBlocks() const { return active_.size(); }
-  size_t numSwappedBlocks() const { return swapped_.size(); }
-  size_t numBlocks() const { return active_.size() + swapped_.size(); }
-  // Memory held by active blocks (the bounded part).
-  size_t activeMemoryBytes() const { return active_.size() * sizeof(VoxelBlock); }
-  std::vector<BlockIndex> allBlocks() const;
+  size_t numActiveBlocks() const { return store_->numActiveBlocks(); }
+  size_t numSwappedBlocks() const { return store_->numSwappedBlocks(); }
+  size_t numBlocks() const { return store_->numBlocks(); }
+  // Memory held by active blocks (the bounded part), bytes.
+  size_t activeMemoryBytes() const { return store_->activeMemoryBytes(); }
+  std::vector<BlockIndex> allBlocks() const { return store_->allBlocks(); }
 
   // Blocks whose voxels changed since the last call (for incremental meshing).
-  BlockSet takeChangedBlocks();
+  BlockSet takeChangedBlocks() { return store_->takeChangedBlocks(); }
 
-  // Swap I/O faults. Lost blocks: swapped blocks whose file could not be read
-  // back, dropped from the map (each reported once, with its path). Swap write
-  // failures: blocks kept in RAM because their file could not be written.
-  // `lost`: true for a lost block (once per block), false for a failed write
-  // (each time the block leaves the local map again).
-  using SwapErrorCallback = std::function<void(bool lost, const std::string& message)>;
-  // Default: one line on stderr per event.
-  void setSwapErrorCallback(SwapErrorCallback cb) { swap_error_cb_ = std::move(cb); }
-  size_t numLostBlocks() const { return lost_blocks_; }
-  size_t numSwapWriteFailures() const { return swap_write_failures_; }
+  // Swap I/O faults (see BlockStore). Lost blocks: swapped blocks whose file
+  // could not be read back, dropped from the map (each reported once, with
+  // its path). Swap write failures: blocks kept in RAM because their file
+  // could not be written.
+  using SwapErrorCallback = BlockStore::SwapErrorCallback;
+  // Default: one line on stderr per event. Called on the calling thread.
+  void setSwapErrorCallback(SwapErrorCallback cb) { store_->setSwapErrorCallback(std::move(cb)); }
+  size_t numLostBlocks() const { return store_->numLostBlocks(); }
+  size_t numSwapWriteFailures() const { return store_->numSwapWriteFailures(); }
 
   // Whole map (both stores) to a binary file (format version 2) and back,
-  // bit-identical. save writes <path>.tmp, syncs it and renames it over path;
-  // on any failure (path a directory, unwritable, disk full) it throws
-  // std::runtime_error naming the path and leaves no .tmp behind.
-  void save(const std::string& path, const MapSaveOptions& options = MapSaveOptions()) const;
+  // bit-identical: saveMapFile / loadMapFile (tsdf_io.h). save writes
+  // <path>.tmp, syncs it and renames it over path; on any failure (path a
+  // directory, unwritable, disk full) it throws std::runtime_error naming the
+  // path and leaves no .tmp behind. Non-const: a disk-swapped block whose file
+  // turns out unreadable is dropped (lost) and not saved.
+  void save(const std::string& path, const MapSaveOptions& options = MapSaveOptions()) {
+    saveMapFile(*store_, path, options);
+  }
   // Replaces the map's contents with the file's, only once the whole file is
-  // read and valid: header (and its CRC), block count against the file size,
-  // each block's CRC, every voxel finite with |tsdf| <= 1 and 0 <= weight <=
-  // max_weight (the file's; the config's for version 1), block indices within
-  // 1e5 m of the origin, no duplicate blocks; the file's voxel size and
-  // truncation must match the config. Throws std::runtime_error naming the
-  // file (and the block) otherwise; the map is then unchanged.
-  void load(const std::string& path);
-  // The header of a map file (std::runtime_error if it is none).
-  static MapFileInfo readHeader(const std::string& path);
-  void clear();
+  // read and valid (see loadMapFile); the file's voxel size and truncation
+  // must match the config. Throws std::runtime_error naming the file (and the
+  // block) otherwise; the map is then unchanged.
+  void load(const std::string& path) { loadMapFile(*store_, path); }
+  // The header of a map file (std::runtime_error if it is none). Thread-safe.
+  static MapFileInfo readHeader(const std::string& path) { return readMapFileHeader(path); }
+  // Removes every block (and the swap files of disk-swapped ones).
+  void clear() { store_->clear(); }
 
+  // Centre of a global voxel, world frame, metres.
   Eigen::Vector3d voxelCenter(const Eigen::Vector3i& global_voxel) const {
     return (global_voxel.cast<double>() + Eigen::Vector3d::Constant(0.5)) * config_.voxel_size;
   }
 
+  // The parts.
+  BlockStore& store() { return *store_; }
+  const BlockStore& store() const { return *store_; }
+  TsdfIntegrator& integrator() { return *integrator_; }
+
  private:
   struct RayTable;
-  void integrateCpu(const std::vector<std::pair<BlockIndex, VoxelBlock*>>& work, const float* depth,
-                    const FmCameraT<float>& cam, const float T_C_W[12], std::vector<char>* changed) const;
   const RayTable& raysFor(const CameraModel& camera);
-  void swapOut(const BlockIndex& index);
-  // nullptr when absent, or when its swap file is unreadable (then lost).
-  std::unique_ptr<VoxelBlock> takeSwapped(const BlockIndex& index);
-  std::string swapPath(const BlockIndex& index) const;
-  // Reads a disk-swapped block; false with the reason when it cannot.
-  bool readSwapFile(const BlockIndex& index, VoxelBlock* out, std::string* why) const;
-  void markLost(const BlockIndex& index, const std::string& why) const;
-  void reportSwapError(bool lost, const std::string& message) const;
 
   TsdfConfig config_;
-  Eigen::Vector3d local_center_ = Eigen::Vector3d::Zero();
-  bool has_local_center_ = false;
-  std::unordered_map<BlockIndex, std::unique_ptr<VoxelBlock>, BlockIndexHash> active_;
-  // Swapped-out blocks: in memory, or (swap_directory set) nullptr + a file.
-  // Mutable: a block whose file turns out unreadable is dropped, even by a
-  // const read.
-  mutable std::unordered_map<BlockIndex, std::unique_ptr<VoxelBlock>, BlockIndexHash> swapped_;
-  mutable std::unordered_map<BlockIndex, std::unique_ptr<VoxelBlock>, BlockIndexHash> disk_cache_;
-  mutable BlockSet changed_;
-  mutable size_t lost_blocks_ = 0;
-  size_t swap_write_failures_ = 0;
-  SwapErrorCallback swap_error_cb_;
+  std::unique_ptr<BlockStore> store_;
+  std::unique_ptr<TsdfIntegrator> integrator_;
   std::vector<std::unique_ptr<RayTable>> ray_tables_;
-  std::unique_ptr<class TsdfIntegratorCl> opencl_;
 };
 
 }  // namespace fisheye_mapping

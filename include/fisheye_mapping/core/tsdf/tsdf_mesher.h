@@ -47,6 +47,8 @@ class TsdfMesher {
   void setMinObservations(int n) { min_observations_ = n; }
 
  private:
+  // Reads only blocks already resident or fetched (BlockStore::find, no
+  // I/O): safe in the parallel loop of recompute().
   BlockOutput computeBlock(const TsdfMap& map, const BlockIndex& index) const;
   std::vector<BlockIndex> recompute(TsdfMap& map, const BlockSet& dirty);
 

@@ -1,0 +1,63 @@
+// Configuration of the TSDF map (paper Sec. III-C): voxel size and
+// truncation, the local-map box, swapping, the integration backend and its
+// threads. Plain data; validate() checks it, fromParams() reads it from the
+// parameter names of config/tsdf_fusion.yaml.
+#ifndef FISHEYE_MAPPING_CORE_TSDF_TSDF_CONFIG_H_
+#define FISHEYE_MAPPING_CORE_TSDF_TSDF_CONFIG_H_
+
+#include <string>
+
+#include <Eigen/Core>
+
+#include "fisheye_mapping/core/camera/camera_model_shared.h"  // before tsdf_shared.h
+#include "fisheye_mapping/core/tsdf/tsdf_shared.h"
+
+namespace fisheye_mapping {
+
+class ParamSource;  // fisheye_mapping/core/common/params.h
+
+// Voxel integration backend (see tsdf_integrator.h).
+enum class TsdfIntegratorKind {
+  kCpu,     // "cpu": OpenMP loop over the blocks (TsdfIntegratorCpu)
+  kOpenCl,  // "opencl": the same per-voxel function as a kernel (TsdfIntegratorCl)
+};
+
+// "cpu" or "opencl"; throws std::invalid_argument naming the bad value.
+TsdfIntegratorKind parseTsdfIntegratorKind(const std::string& name);
+// "cpu" or "opencl".
+const char* toString(TsdfIntegratorKind kind);
+
+struct TsdfConfig {
+  double voxel_size = 0.05;        // metres
+  double truncation_voxels = 4.0;  // mu = truncation_voxels * voxel_size
+  float max_weight = 100.0f;       // cap of the per-voxel observation count
+  int min_observations = 3;        // outputs keep voxels observed at least this often
+  double max_range = 0.0;          // depth beyond this many metres is not fused (0: no limit)
+  // Active box around the vehicle (world axes): centre = vehicle + offset.
+  Eigen::Vector3d local_map_size = Eigen::Vector3d(60.0, 60.0, 3.0);
+  Eigen::Vector3d local_map_offset = Eigen::Vector3d(0.0, 0.0, 1.0);
+  std::string swap_directory;  // empty: swapped blocks stay in host memory
+  // Threads of the map's parallel loops (allocation, CPU integration), as an
+  // OpenMP num_threads clause on those loops only; 0: the OpenMP default
+  // (OMP_NUM_THREADS, else all cores). The process-wide OpenMP setting is
+  // never changed.
+  int threads = 0;
+  // Voxel integration: kCpu (OpenMP loop) or kOpenCl (same function as a
+  // kernel, on opencl_device; see OpenClContext for the syntax); parameter
+  // `integrator`: "cpu" | "opencl", parsed once by fromParams().
+  TsdfIntegratorKind integrator = TsdfIntegratorKind::kCpu;
+  std::string opencl_device;
+
+  double truncation() const { return truncation_voxels * voxel_size; }  // mu, metres
+  double blockSize() const { return FM_BLOCK_SIDE * voxel_size; }       // metres
+  // Throws std::invalid_argument naming the field.
+  void validate() const;
+
+  // The parameter names of config/tsdf_fusion.yaml over the defaults above;
+  // validated (std::invalid_argument naming the field or parameter).
+  static TsdfConfig fromParams(const ParamSource& p);
+};
+
+}  // namespace fisheye_mapping
+
+#endif  // FISHEYE_MAPPING_CORE_TSDF_TSDF_CONFIG_H_
