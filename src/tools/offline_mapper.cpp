@@ -165,7 +165,11 @@ int main(int argc, char** argv) {
       std::string yaml = detector;
       if (detector == "nanodet") yaml = config_dir + "/detector/nanodet.yaml";
       else if (detector == "darknet") yaml = config_dir + "/detector/yolov3-tiny.yaml";
-      det = std::make_unique<fm::Detector>(fm::loadDetectorConfig(yaml));
+      // The detector stage's config (thresholds, DNN device of the `detector`
+      // section) with the model chosen by --detector, as the nodelet loads it.
+      fm::DetectorStageConfig stage = mapper_cfg.detection;
+      stage.model_config = yaml;
+      det = std::make_unique<fm::Detector>(stage.loadModel(), stage.device());
     }
     const bool detecting = det != nullptr;
     fm::FrameSetMapper mapper(rig, mapper_cfg, std::move(det));
