@@ -35,12 +35,8 @@ cv::Mat wallDepth(const fm::Rig& rig, double wall) {
   return d;
 }
 
-size_t countValid(const cv::Mat& d) {
-  size_t n = 0;
-  for (int v = 0; v < d.rows; ++v)
-    for (int u = 0; u < d.cols; ++u) n += std::isfinite(d.at<float>(v, u));
-  return n;
-}
+// Pixels that are not NaN (NaN != NaN).
+size_t countValid(const cv::Mat& d) { return size_t(cv::countNonZero(d == d)); }
 
 fm::FrameSetMapperConfig smallConfig() {
   fm::FrameSetMapperConfig c;

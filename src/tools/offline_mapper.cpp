@@ -31,7 +31,6 @@
 #include <tf2/buffer_core.h>
 #include <tf2_eigen/tf2_eigen.h>
 #include <tf2_msgs/TFMessage.h>
-#include <cv_bridge/cv_bridge.h>
 
 #include <algorithm>
 #include <chrono>
@@ -55,6 +54,7 @@
 #include "fisheye_mapping/core/depth/depth_image.h"
 #include "fisheye_mapping/core/mapping/frame_set_mapper.h"
 #include "fisheye_mapping/core/sync/frame_sync.h"
+#include "fisheye_mapping/ros/conversions.h"
 
 namespace fm = fisheye_mapping;
 namespace cli = fm::cli;
@@ -179,10 +179,6 @@ int main(int argc, char** argv) {
 
     if (detecting && depth_src == "gt")
       throw std::runtime_error("--depth gt works with --detector ground_truth or none (no images are read)");
-    const auto toMat = [](const sensor_msgs::Image::ConstPtr& im) {
-      return cv_bridge::toCvShare(im, im->encoding == "mono8" ? "mono8" : "bgr8")->image;
-    };
-
     rosbag::Bag bag;
     try {
       bag.open(bag_path, rosbag::bagmode::Read);
@@ -259,22 +255,18 @@ int main(int argc, char** argv) {
           if (it == gt_boxes.end()) {
             ++no_boxes;
           } else {
-            boxes.emplace();
-            boxes->image_width = int(it->second->image_width), boxes->image_height = int(it->second->image_height);
-            for (const auto& b : it->second->detections) {
-              fm::Detection d;
-              d.x_min = b.x_min, d.y_min = b.y_min, d.x_max = b.x_max, d.y_max = b.y_max;
-              boxes->boxes.push_back(d);
-            }
+            fm::StampedDetections d = fm::fromDetectionArrayMsg(*it->second);
+            boxes = fm::ImageBoxes{std::move(d.detections), d.image_width, d.image_height};
           }
         }
         fm::FrameSetResult r;
         if (depth_src == "gt") {
-          if (set[0]->encoding != "32FC1") throw std::runtime_error(gt_depth_topic + " is not 32FC1");
-          r = mapper.processDepth(cv_bridge::toCvCopy(set[0])->image, T_W_B, boxes);
+          r = mapper.processDepth(fm::toDepth(*set[0], gt_depth_topic), T_W_B, boxes);
         } else {
           std::vector<cv::Mat> images;
-          for (const auto& im : set) images.push_back(toMat(im));
+          // Decoded as the depth nodelet decodes them (ros/conversions.h).
+          for (size_t c = 0; c < set.size(); ++c)
+            images.push_back(fm::toCvImageShare(set[c], fm::ImageTarget::kSweep, rig.cameras[c].name));
           r = mapper.process(images, T_W_B, boxes);
         }
         if (!save_depth.empty())
