@@ -148,7 +148,7 @@ TEST_F(MapAccuracy, BadOptionsAndPathsGiveExactErrors) {
       {good + " --t nan", "map_accuracy: --t needs a number, got 'nan'", 2},
       {good + " --trail-tol x", "map_accuracy: --trail-tol needs a number, got 'x'", 2},
       {good + " --trail-tol", "map_accuracy: --trail-tol needs a value", 2},
-      {good + " --bogus 1", "map_accuracy: unknown argument '--bogus'", 2},
+      {good + " --bogus 1", "map_accuracy: unknown option '--bogus'", 2},
       {"--cloud " + dir_ + "/map.pcd", "map_accuracy: --cloud and one of --mesh, --ref are required", 2},
   };
   for (const auto& c : cases) {

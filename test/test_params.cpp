@@ -46,6 +46,7 @@ const std::vector<Param> kSweepParams = {
     {"fronto_planes", Kind::Int},        {"near", Kind::Number},
     {"far", Kind::Number},               {"ground_planes", Kind::Int},
     {"ground_min", Kind::Number},        {"ground_max", Kind::Number},
+    {"ground_height", Kind::Number},
     {"window_full", Kind::Int},          {"window_half", Kind::Int},
     {"aggregation", Kind::String},       {"best_k", Kind::Int},
     {"subpixel", Kind::Bool},            {"resolution", Kind::String},

@@ -174,6 +174,37 @@ TEST(PlaneSweepPlanes, GroundPlanesContainPointsAtTheirHeight) {
   for (int j = 2; j < config.fronto_planes; ++j) EXPECT_NEAR(1 / planes[j].d - 1 / planes[j - 1].d, step, 1e-6);
 }
 
+// A base frame 0.3 m above the road (a rear axle) with ground_height -0.3
+// sweeps the same ground planes, relative to the camera, as the base frame on
+// the road with ground_height 0: each plane contains the base points at height
+// ground_height + h, i.e. the road points at h.
+TEST(PlaneSweepPlanes, GroundHeightShiftsTheGroundFamilyWithTheBaseFrame) {
+  const fm::Rig rig = fm::loadKalibrRig(kData + "/small_rig_camchain.yaml", kData + "/small_rig_mount.yaml");
+  const Eigen::Isometry3d T_road_ref = rig.cameras[1].T_base_cam;  // base frame on the road
+  Eigen::Isometry3d T_axle_ref = T_road_ref;                        // base frame 0.3 m up
+  T_axle_ref.translation().z() -= 0.3;
+  fm::PlaneSweepConfig on_road, axle;
+  axle.ground_height = -0.3;
+  const auto a = fm::makeSweepPlanes(on_road, &T_road_ref);
+  const auto b = fm::makeSweepPlanes(axle, &T_axle_ref);
+  ASSERT_EQ(a.size(), static_cast<size_t>(on_road.fronto_planes + on_road.ground_planes));
+  ASSERT_EQ(b.size(), a.size());
+  for (size_t i = 0; i < a.size(); ++i) {
+    EXPECT_EQ(a[i].family, b[i].family) << i;
+    EXPECT_NEAR(a[i].nx, b[i].nx, 1e-6) << i;
+    EXPECT_NEAR(a[i].ny, b[i].ny, 1e-6) << i;
+    EXPECT_NEAR(a[i].nz, b[i].nz, 1e-6) << i;
+    EXPECT_NEAR(a[i].d, b[i].d, 1e-5) << i;
+  }
+  // The lowest plane of the axle rig holds the base points at z = -0.3 - 0.3.
+  const auto& p = b[axle.fronto_planes];
+  const Eigen::Vector3d X_ref = T_axle_ref.inverse() * Eigen::Vector3d(4.0, -1.0, -0.6);
+  EXPECT_NEAR(p.nx * X_ref.x() + p.ny * X_ref.y() + p.nz * X_ref.z(), p.d, 1e-4);
+  // Without ground_height the axle rig's planes sit 0.3 m too high (d 0.3 shorter).
+  const auto c = fm::makeSweepPlanes(on_road, &T_axle_ref);
+  EXPECT_NEAR(a[on_road.fronto_planes].d - c[on_road.fronto_planes].d, 0.3, 1e-5);
+}
+
 TEST(PlaneSweepFilters, EachFilterByHand) {
   cv::Mat raw(5, 5, CV_32FC1, cv::Scalar(10.0f)), cost(5, 5, CV_32FC1, cv::Scalar(0.01f)),
       ratio(5, 5, CV_32FC1, cv::Scalar(0.5f));

@@ -1,7 +1,10 @@
 // rostest: the PlaneSweepDepth nodelet subscribes only while someone listens,
 // turns rendered frame sets into depth with the reference image's header that
-// matches the rendered truth, and skips bad frame sets without going down.
+// matches the rendered truth, and skips bad frame sets without going down;
+// depth/camera_info is the camchain's reference camera and depth/image_z is
+// range * the z of each pixel's unit ray.
 #include <cv_bridge/cv_bridge.h>
+#include <dynamic_reconfigure/Reconfigure.h>
 #include <gtest/gtest.h>
 #include <ros/package.h>
 #include <ros/ros.h>
@@ -52,10 +55,13 @@ TEST(PlaneSweepDepthNode, LazyDepthWithTheReferenceHeaderMatchingTruth) {
   ros::WallDuration(1.0).sleep();
   EXPECT_EQ(pub.getNumSubscribers(), 0u);
 
-  sensor_msgs::ImageConstPtr depth, cost, uniq;
-  auto sub_d = nh.subscribe<sensor_msgs::Image>("depth", 5, [&](const sensor_msgs::ImageConstPtr& m) { depth = m; });
-  auto sub_c = nh.subscribe<sensor_msgs::Image>("cost", 5, [&](const sensor_msgs::ImageConstPtr& m) { cost = m; });
-  auto sub_u = nh.subscribe<sensor_msgs::Image>("uniqueness", 5, [&](const sensor_msgs::ImageConstPtr& m) { uniq = m; });
+  sensor_msgs::ImageConstPtr depth, cost, uniq, zdepth;
+  sensor_msgs::CameraInfoConstPtr info;
+  auto sub_i = nh.subscribe<sensor_msgs::CameraInfo>("depth/camera_info", 5, [&](const sensor_msgs::CameraInfoConstPtr& m) { info = m; });
+  auto sub_z = nh.subscribe<sensor_msgs::Image>("depth/image_z", 5, [&](const sensor_msgs::ImageConstPtr& m) { zdepth = m; });
+  auto sub_d = nh.subscribe<sensor_msgs::Image>("depth/image", 5, [&](const sensor_msgs::ImageConstPtr& m) { depth = m; });
+  auto sub_c = nh.subscribe<sensor_msgs::Image>("depth/cost", 5, [&](const sensor_msgs::ImageConstPtr& m) { cost = m; });
+  auto sub_u = nh.subscribe<sensor_msgs::Image>("depth/uniqueness", 5, [&](const sensor_msgs::ImageConstPtr& m) { uniq = m; });
   ASSERT_TRUE(waitFor([&] { return pub.getNumSubscribers() == 1; }, 20.0)) << "the nodelet never subscribed";
 
   // A bad frame set first: wrong encoding on a supporting camera.
@@ -70,7 +76,7 @@ TEST(PlaneSweepDepthNode, LazyDepthWithTheReferenceHeaderMatchingTruth) {
   EXPECT_FALSE(depth) << "a bad frame set produced depth";
 
   pub.publish(set);
-  ASSERT_TRUE(waitFor([&] { return depth && cost && uniq; }, 60.0)) << "no depth: the nodelet did not survive the bad frame sets";
+  ASSERT_TRUE(waitFor([&] { return depth && cost && uniq && info && zdepth; }, 60.0)) << "no depth: the nodelet did not survive the bad frame sets";
   EXPECT_EQ(depth->header.stamp, set.header.stamp);
   EXPECT_EQ(depth->header.frame_id, rig.cameras[0].frame_id);
   EXPECT_EQ(cost->header.stamp, set.header.stamp);
@@ -78,12 +84,39 @@ TEST(PlaneSweepDepthNode, LazyDepthWithTheReferenceHeaderMatchingTruth) {
   EXPECT_EQ(depth->encoding, sensor_msgs::image_encodings::TYPE_32FC1);
   ASSERT_EQ(depth->width, 256u);
   ASSERT_EQ(depth->height, 136u);
-  const cv::Mat d = cv_bridge::toCvShare(depth)->image;
+  const sensor_msgs::ImageConstPtr first = depth;  // keeps d's data
+  const cv::Mat d = cv_bridge::toCvShare(first)->image;
   // Filtered depth (paper defaults) of quarter-resolution images: sparse but
   // right where present.
   const fm::DepthErrorStats e = fm::depthError(d, truth, cv::Mat(), 15.0, 60.0);
   EXPECT_GT(e.valid, 1000u);
   EXPECT_LT(e.median, 0.2) << "median error " << e.median;  // 130 px focal length, 0.3 m baselines
+  // depth/camera_info: the depth image's header and the camchain's cam0
+  // (test/data/small_rig_camchain.yaml: omni [0.98, 130, 130, 127.5, 67.5],
+  // radtan [-0.02, 0.004, 0.0002, -0.0001], 256 x 136).
+  EXPECT_EQ(info->header.stamp, depth->header.stamp);
+  EXPECT_EQ(info->header.frame_id, depth->header.frame_id);
+  EXPECT_EQ(info->width, 256u);
+  EXPECT_EQ(info->height, 136u);
+  EXPECT_EQ(info->distortion_model, "omni");
+  const std::vector<double> K{130.0, 0.0, 127.5, 0.0, 130.0, 67.5, 0.0, 0.0, 1.0};
+  for (int k = 0; k < 9; ++k) EXPECT_DOUBLE_EQ(info->K[k], K[k]) << k;
+  EXPECT_EQ(info->D, (std::vector<double>{0.98, -0.02, 0.004, 0.0002, -0.0001}));
+  // depth/image_z: z = range * ray.z, the ray unprojected here by the core model.
+  ASSERT_EQ(zdepth->header.stamp, depth->header.stamp);
+  const cv::Mat z = cv_bridge::toCvShare(zdepth)->image;
+  ASSERT_EQ(z.size(), d.size());
+  int checked = 0;
+  for (int v = 0; v < d.rows; ++v) {
+    for (int u = 0; u < d.cols; ++u) {
+      const float r = d.at<float>(v, u);
+      Eigen::Vector3d ray;
+      if (!std::isfinite(r) || !rig.cameras[0].model.unproject(Eigen::Vector2d(u, v), &ray) || ray.z() <= 0) continue;
+      ASSERT_NEAR(z.at<float>(v, u), r * ray.normalized().z(), 1e-4 * r) << u << "," << v;
+      ++checked;
+    }
+  }
+  EXPECT_GT(checked, 1000);
   // The cost image agrees with the filter: every depth kept has cost <= 0.3.
   const cv::Mat c = cv_bridge::toCvShare(cost)->image;
   for (int v = 0; v < d.rows; ++v) {
@@ -91,6 +124,22 @@ TEST(PlaneSweepDepthNode, LazyDepthWithTheReferenceHeaderMatchingTruth) {
       if (std::isfinite(d.at<float>(v, u))) ASSERT_LE(c.at<float>(v, u), 0.3f);
     }
   }
+  // dynamic_reconfigure: a stricter uniqueness ratio keeps fewer pixels.
+  dynamic_reconfigure::Reconfigure srv;
+  dynamic_reconfigure::DoubleParameter ratio;
+  ratio.name = "max_ratio";
+  ratio.value = 0.5;
+  srv.request.config.doubles.push_back(ratio);
+  ASSERT_TRUE(ros::service::waitForService("plane_sweep/set_parameters", ros::Duration(10.0)));
+  ASSERT_TRUE(ros::service::call("plane_sweep/set_parameters", srv));
+  const int before = cv::countNonZero(d == d);  // d: the first depth's (its message held by `first`)
+  fisheye_mapping::CameraFrameSet strict = set;
+  strict.header.stamp += ros::Duration(1.0);
+  for (auto& img : strict.images) img.header.stamp = strict.header.stamp;
+  pub.publish(strict);
+  ASSERT_TRUE(waitFor([&] { return depth->header.stamp == strict.header.stamp; }, 60.0)) << "no depth after reconfigure";
+  const int after = cv::countNonZero(cv_bridge::toCvShare(depth)->image == cv_bridge::toCvShare(depth)->image);
+  EXPECT_LT(after, before * 0.9) << "max_ratio 0.5 kept " << after << " of " << before << " pixels";
 }
 
 int main(int argc, char** argv) {

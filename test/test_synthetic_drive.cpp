@@ -1,12 +1,15 @@
 // Synthetic drives: ground-truth depth against analytic ray-plane
-// intersections, cross-camera consistency, and the bags make_drive writes
-// (contents, determinism, option errors), read back with rosbag.
+// intersections, cross-camera consistency, the vehicles (glass, wheels,
+// lights, visible boxes under occlusion and at the image edge, YOLO labels),
+// and the bags and training sets make_drive writes (contents, determinism,
+// option errors), read back with rosbag.
 #include <sys/wait.h>
 
 #include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <map>
+#include <random>
 #include <set>
 #include <sstream>
 
@@ -20,6 +23,7 @@
 #include <tf2/buffer_core.h>
 #include <tf2_eigen/tf2_eigen.h>
 #include <yaml-cpp/yaml.h>
+#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "fisheye_mapping/Detection2DArray.h"
@@ -27,6 +31,7 @@
 #include "fisheye_mapping/core/tsdf/tsdf_mesher.h"
 #include "fisheye_mapping/core/camera/rig.h"
 #include "fisheye_mapping/core/sim/synthetic_world.h"
+#include "fisheye_mapping/core/sim/vehicle_labels.h"
 
 namespace fm = fisheye_mapping;
 using fm::synth::World;
@@ -184,9 +189,12 @@ TEST_F(MakeDrive, BagHoldsImagesTruthAndTf) {
       if (topic == "/cam0/image_raw") image_stamps.push_back(img->header.stamp);
     } else if (auto dets = m.instantiate<fisheye_mapping::Detection2DArray>()) {
       EXPECT_EQ(dets->header.frame_id, "cam0_optical_frame");
-      det_stamps.push_back(dets->header.stamp);
+      if (topic == "/cam0/detections_gt") det_stamps.push_back(dets->header.stamp);
       for (const auto& d : dets->detections) {
-        EXPECT_EQ(d.class_name, "car");
+        // COCO names and ids of the vehicle kinds (a van is a COCO car).
+        const std::map<std::string, int> coco = {{"car", 2}, {"bus", 5}, {"truck", 7}};
+        ASSERT_TRUE(coco.count(d.class_name)) << d.class_name;
+        EXPECT_EQ(d.class_id, coco.at(d.class_name));
         EXPECT_LT(d.x_min, d.x_max);
         EXPECT_LE(d.x_max, 256.0f);
       }
@@ -209,6 +217,8 @@ TEST_F(MakeDrive, BagHoldsImagesTruthAndTf) {
   EXPECT_EQ(count["/cam0/depth_gt"], 5);
   EXPECT_EQ(count["/cam1/depth_gt"], 0);
   EXPECT_EQ(count["/cam0/detections_gt"], 5);
+  EXPECT_EQ(count["/cam0/vehicles_gt"], 5);
+  EXPECT_EQ(count["/cam1/detections_gt"], 0);  // --gt-boxes ref
   EXPECT_EQ(count["/tf_static"], 1);
   EXPECT_EQ(count["/tf"], 56);  // 0 .. 0.55 s every 10 ms
   EXPECT_EQ(static_children, (std::set<std::string>{"cam0_optical_frame", "cam1_optical_frame", "cam2_optical_frame"}));
@@ -265,6 +275,11 @@ TEST_F(MakeDrive, FusedTruthLiesOnTheStaticScene) {
       dist = std::min(dist, std::abs(e.cwiseMax(0.0).norm() + std::min(e.maxCoeff(), 0.0)));
     }
     for (const auto& sp : world.staticSpheres()) dist = std::min(dist, std::abs((q - sp.c).norm() - sp.r));
+    for (int id = world.numVehicles(); id < world.numVehicleIds(); ++id) {  // parked vehicles
+      const Eigen::Isometry3d T = world.vehiclePoseById(id, 0.0);
+      if ((T.translation() - q).norm() > world.vehicleModel(id).radius() + 1) continue;
+      dist = std::min(dist, std::abs(world.vehicleModel(id).distance(T.inverse() * q)));
+    }
     near += dist < cfg.voxel_size;
   }
   std::cout << cloud.size() << " surface points, " << near << " within one voxel of the static scene\n";
@@ -517,6 +532,329 @@ TEST_F(SensorModelTest, ResponseNoiseAndBlurAreTheSpecifiedOnes) {
   fm::synth::SensorModel bad;
   bad.gain = -1;
   EXPECT_THROW(render(bad), std::invalid_argument);
+}
+
+// --- Vehicles: built from more than boxes, with occlusion-aware visible boxes.
+
+using fm::synth::VehicleDims;
+using fm::synth::VehicleKind;
+using fm::synth::VehicleModel;
+
+fm::CameraModel pinhole480() {
+  fm::Intrinsics k;
+  k.fx = k.fy = 300;
+  k.cx = 239.5;
+  k.cy = 159.5;
+  k.width = 480;
+  k.height = 320;
+  return fm::CameraModel::pinhole(k);
+}
+
+// A camera 1.5 m above the ground at the origin, looking along world +x.
+Eigen::Isometry3d lookAlongX() {
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear().col(0) = Eigen::Vector3d(0, -1, 0);
+  T.linear().col(1) = Eigen::Vector3d(0, 0, -1);
+  T.linear().col(2) = Eigen::Vector3d(1, 0, 0);
+  T.translation() = Eigen::Vector3d(0, 0, 1.5);
+  return T;
+}
+
+Eigen::Isometry3d placed(double x, double y, double heading_deg) {
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = Eigen::AngleAxisd(heading_deg * M_PI / 180, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  T.translation() = Eigen::Vector3d(x, y, 0);
+  return T;
+}
+
+WorldConfig emptyFlat() {
+  WorldConfig wc;
+  wc.preset = "flat";
+  wc.moving_vehicles = 0;
+  wc.route_length = 60;
+  return wc;
+}
+
+VehicleDims dimsOf(VehicleKind kind, float paint) {
+  VehicleDims d;
+  d.kind = kind;
+  d.paint = paint;
+  switch (kind) {
+    case VehicleKind::kCar: d.length = 4.5, d.width = 1.8, d.height = 1.45; break;
+    case VehicleKind::kVan: d.length = 5.2, d.width = 2.0, d.height = 2.1; break;
+    case VehicleKind::kTruck: d.length = 9.0, d.width = 2.5, d.height = 3.5; break;
+    case VehicleKind::kBus: d.length = 11.5, d.width = 2.5, d.height = 3.1; break;
+  }
+  return d;
+}
+
+// The extent of the vehicle's projected vertices, as the pixel box of the
+// pixel centres inside it (pixel u's centre at u; box [x, x + width)).
+cv::Rect2d projectedBox(const fm::CameraModel& cam, const Eigen::Isometry3d& T_W_C, const VehicleModel& m,
+                        const Eigen::Isometry3d& T_W_V) {
+  double u0 = 1e9, v0 = 1e9, u1 = -1e9, v1 = -1e9;
+  for (const auto& tri : m.triangles()) {
+    for (const auto& p : tri) {
+      Eigen::Vector2d uv;
+      if (!cam.project(T_W_C.inverse() * (T_W_V * p), &uv)) continue;
+      u0 = std::min(u0, uv.x()), u1 = std::max(u1, uv.x()), v0 = std::min(v0, uv.y()), v1 = std::max(v1, uv.y());
+    }
+  }
+  return cv::Rect2d(std::ceil(u0), std::ceil(v0), std::floor(u1) + 1 - std::ceil(u0), std::floor(v1) + 1 - std::ceil(v0));
+}
+
+TEST(Vehicles, EachKindShowsDarkGlassWheelsAndLightsAndItsDepthLiesOnItsSurface) {
+  const fm::CameraModel cam = pinhole480();
+  const auto rays = fm::pixelRays(cam);
+  const Eigen::Isometry3d T_W_C = lookAlongX();
+  const std::map<VehicleKind, double> distance = {
+      {VehicleKind::kCar, 8}, {VehicleKind::kVan, 9}, {VehicleKind::kTruck, 14}, {VehicleKind::kBus, 17}};
+  for (const auto& [kind, dist] : distance) {
+    for (float paint : {0.3f, 0.85f}) {
+      World world(emptyFlat());
+      // Front three-quarter view: the front and the right side face the camera.
+      const Eigen::Isometry3d T_W_V = placed(dist, 0, 215);
+      const int id = world.addParkedVehicle(dimsOf(kind, paint), T_W_V);
+      const VehicleModel& model = world.vehicleModel(id);
+      const auto frame = world.render(cam, rays, T_W_C, 0.0, 1);
+      const std::string what = std::string(fm::synth::kindName(kind)) + " paint " + std::to_string(paint);
+      if (std::getenv("FM_SAVE_RENDERS")) cv::imwrite("/tmp/fm_vehicle_" + what.substr(0, what.find(' ')) + ".png", frame.image);
+      double sum[2] = {0, 0};
+      int n[2] = {0, 0}, lamps = 0;
+      for (int v = 0; v < cam.height(); ++v) {
+        for (int u = 0; u < cam.width(); ++u) {
+          if (frame.ids.at<int16_t>(v, u) != id) continue;
+          const uint8_t m = frame.materials.at<uint8_t>(v, u), g = frame.image.at<uint8_t>(v, u);
+          if (m == fm::synth::kGlass || m == fm::synth::kCarPaint) sum[m == fm::synth::kGlass] += g, ++n[m == fm::synth::kGlass];
+          lamps += m == fm::synth::kLight && g > 200;
+          // Ground-truth depth: the point lies on the vehicle's surface.
+          const Eigen::Vector3d X = T_W_C * (frame.depth.at<float>(v, u) * rays[v * cam.width() + u].cast<double>());
+          ASSERT_NEAR(model.distance(T_W_V.inverse() * X), 0.0, 1e-4) << what << " pixel " << u << "," << v;
+        }
+      }
+      ASSERT_GT(n[0], 300) << what;
+      ASSERT_GT(n[1], 100) << what;
+      const double body = sum[0] / n[0], glass = sum[1] / n[1];
+      std::cout << what << ": body " << body << " (" << n[0] << " px), glass " << glass << " (" << n[1] << " px), "
+                << lamps << " lit head light pixels\n";
+      EXPECT_LT(glass, 0.8 * body) << what;
+      EXPECT_GE(lamps, 4) << what;
+      // Wheels on the visible (right, -y) side: a light hub at the centre of
+      // the outer face, a dark tyre below it, near the ground.
+      int wheels = 0;
+      for (const Eigen::Vector3d& c : model.wheelCentres()) {
+        if (c.y() > 0) continue;
+        auto pixelAt = [&](const Eigen::Vector3d& local) {
+          Eigen::Vector2d uv;
+          EXPECT_TRUE(cam.project(T_W_C.inverse() * (T_W_V * local), &uv));
+          return cv::Point(static_cast<int>(std::round(uv.x())), static_cast<int>(std::round(uv.y())));
+        };
+        const cv::Point hub = pixelAt(c), tyre = pixelAt(c - Eigen::Vector3d(0, 0, 0.82 * model.wheelRadius()));
+        EXPECT_EQ(frame.ids.at<int16_t>(hub), id) << what;
+        EXPECT_EQ(frame.materials.at<uint8_t>(hub), fm::synth::kHub) << what;
+        EXPECT_EQ(frame.materials.at<uint8_t>(tyre), fm::synth::kTyre) << what;
+        EXPECT_LT(frame.image.at<uint8_t>(tyre), 0.6 * body) << what;
+        ++wheels;
+      }
+      EXPECT_EQ(wheels, kind == VehicleKind::kTruck ? 3 : 2) << what;  // a 9 m truck has two rear axles
+    }
+  }
+}
+
+TEST(Vehicles, VisibleBoxIsTheExtentOfTheIdPixels) {
+  // By hand: id 0 at (u, v) = (2, 1), (5, 3), (3, 6) -> x 2..5, y 1..6; id 1 at
+  // (9, 7) alone; id 2 has 2 pixels, fewer than asked for; id 7 is beyond num_ids.
+  cv::Mat ids(8, 10, CV_16SC1, cv::Scalar(-1));
+  ids.at<int16_t>(1, 2) = 0, ids.at<int16_t>(3, 5) = 0, ids.at<int16_t>(6, 3) = 0;
+  ids.at<int16_t>(7, 9) = 1;
+  ids.at<int16_t>(0, 0) = 2, ids.at<int16_t>(0, 1) = 2;
+  ids.at<int16_t>(4, 4) = 7;
+  const auto boxes = fm::synth::visibleBoxes(ids, 3, 1);
+  ASSERT_EQ(boxes.size(), 3u);
+  EXPECT_EQ(boxes[0].id, 0);
+  EXPECT_EQ(boxes[0].box, cv::Rect(2, 1, 4, 6));
+  EXPECT_EQ(boxes[0].pixels, 3);
+  EXPECT_EQ(boxes[1].box, cv::Rect(9, 7, 1, 1));
+  EXPECT_EQ(boxes[2].box, cv::Rect(0, 0, 2, 1));
+  const auto big = fm::synth::visibleBoxes(ids, 3, 3);
+  ASSERT_EQ(big.size(), 1u);
+  EXPECT_EQ(big[0].id, 0);
+  EXPECT_THROW(fm::synth::visibleBoxes(cv::Mat(2, 2, CV_8UC1), 3, 1), std::invalid_argument);
+}
+
+TEST(Vehicles, AnOccludedVehiclesBoxIsSmallerThanItsProjectedBox) {
+  const fm::CameraModel cam = pinhole480();
+  const auto rays = fm::pixelRays(cam);
+  const Eigen::Isometry3d T_W_C = lookAlongX();
+  const VehicleDims car = dimsOf(VehicleKind::kCar, 0.6f);
+  const Eigen::Isometry3d far = placed(14, 0, 90), near = placed(9, 2.2, 90);  // broadside, near one to the left
+  World alone(emptyFlat()), both(emptyFlat());
+  const int id = alone.addParkedVehicle(car, far);
+  ASSERT_EQ(both.addParkedVehicle(car, far), id);
+  both.addParkedVehicle(car, near);
+  const cv::Rect2d projected = projectedBox(cam, T_W_C, alone.vehicleModel(id), far);
+  const auto seen_alone = fm::synth::visibleBoxes(alone.render(cam, rays, T_W_C, 0, 1).ids, alone.numVehicleIds(), 1);
+  const auto seen_both = fm::synth::visibleBoxes(both.render(cam, rays, T_W_C, 0, 1).ids, both.numVehicleIds(), 1);
+  ASSERT_EQ(seen_alone.size(), 1u);
+  ASSERT_EQ(seen_both.size(), 2u);
+  const cv::Rect a = seen_alone[0].box, b = seen_both[0].box;
+  std::cout << "projected " << projected << ", seen alone " << a << ", behind the other car " << b << "\n";
+  // Unoccluded, the visible box is the projected one (to the pixel); behind
+  // the near car it loses its left part (the near car hides world +y).
+  EXPECT_NEAR(a.x, projected.x, 1.0);
+  EXPECT_NEAR(a.x + a.width, projected.x + projected.width, 1.0);
+  EXPECT_NEAR(a.y, projected.y, 1.0);
+  EXPECT_NEAR(a.y + a.height, projected.y + projected.height, 1.0);
+  EXPECT_GT(b.x, projected.x + 20);
+  EXPECT_LT(b.width, projected.width - 20);
+  EXPECT_EQ(b.x + b.width, a.x + a.width);
+  EXPECT_LT(seen_both[0].pixels, seen_alone[0].pixels);
+}
+
+TEST(Vehicles, AVehicleCutByTheImageEdgeHasABoxClippedToTheImage) {
+  const fm::CameraModel cam = pinhole480();
+  const auto rays = fm::pixelRays(cam);
+  const Eigen::Isometry3d T_W_C = lookAlongX();
+  World world(emptyFlat());
+  const Eigen::Isometry3d T = placed(7, 5.5, 0);
+  const int id = world.addParkedVehicle(dimsOf(VehicleKind::kVan, 0.6f), T);
+  const cv::Rect2d projected = projectedBox(cam, T_W_C, world.vehicleModel(id), T);
+  const auto seen = fm::synth::visibleBoxes(world.render(cam, rays, T_W_C, 0, 1).ids, world.numVehicleIds(), 1);
+  ASSERT_EQ(seen.size(), 1u);
+  std::cout << "projected " << projected << ", visible " << seen[0].box << "\n";
+  EXPECT_LT(projected.x, -50);  // beyond the left edge
+  EXPECT_EQ(seen[0].box.x, 0);
+  EXPECT_NEAR(seen[0].box.x + seen[0].box.width, projected.x + projected.width, 1.0);
+  EXPECT_LE(seen[0].box.y + seen[0].box.height, cam.height());
+}
+
+TEST(Vehicles, YoloLabelsRoundTripToThePixelBoxes) {
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> U(0.0, 1.0);
+  for (int i = 0; i < 1000; ++i) {
+    const cv::Size image(64 + static_cast<int>(2000 * U(rng)), 64 + static_cast<int>(1000 * U(rng)));
+    const int x = static_cast<int>(U(rng) * (image.width - 2)), y = static_cast<int>(U(rng) * (image.height - 2));
+    const cv::Rect box(x, y, 1 + static_cast<int>(U(rng) * (image.width - x - 1)), 1 + static_cast<int>(U(rng) * (image.height - y - 1)));
+    int cls = -1;
+    cv::Rect2d back;
+    fm::synth::parseYoloLine(fm::synth::yoloLine(i % 4, box, image), image, &cls, &back);
+    ASSERT_EQ(cls, i % 4);
+    ASSERT_NEAR(back.x, box.x, 0.5) << image;
+    ASSERT_NEAR(back.y, box.y, 0.5) << image;
+    ASSERT_NEAR(back.x + back.width, box.x + box.width, 0.5) << image;
+    ASSERT_NEAR(back.y + back.height, box.y + box.height, 0.5) << image;
+  }
+  // By hand: a 100 x 50 box at (200, 100) in a 1000 x 500 image.
+  EXPECT_EQ(fm::synth::yoloLine(3, cv::Rect(200, 100, 100, 50), cv::Size(1000, 500)), "3 0.2500000 0.2500000 0.100000 0.100000");
+  // A box touching the image's edges stays inside it: cx -+ w / 2 in [0, 1].
+  const std::string edge = fm::synth::yoloLine(0, cv::Rect(0, 0, 1023, 544), cv::Size(1023, 544));
+  EXPECT_EQ(edge, "0 0.5000000 0.5000000 1.000000 1.000000");
+  const std::string odd = fm::synth::yoloLine(0, cv::Rect(0, 3, 7, 533), cv::Size(1023, 544));
+  int c;
+  cv::Rect2d b;
+  fm::synth::parseYoloLine(odd, cv::Size(1023, 544), &c, &b);
+  std::istringstream fields(odd);
+  double cls, cx, cy, w, h;
+  fields >> cls >> cx >> cy >> w >> h;
+  EXPECT_GE(cx - 0.5 * w, -1e-12) << odd;
+  EXPECT_LE(cy + 0.5 * h, 1.0 + 1e-12) << odd;
+  const struct {
+    std::string line, expected;
+  } bad[] = {{"1 0.5 0.5 0.1", "needs 5 fields"},
+             {"1 0.5 x 0.1 0.1", "field 3 is not a number: 'x'"},
+             {"1 0.5 1.5 0.1 0.1", "field 3 must lie in [0, 1], got 1.5"},
+             {"-1 0.5 0.5 0.1 0.1", "class must be a whole number >= 0, got -1"}};
+  for (const auto& b : bad) {
+    int cls;
+    cv::Rect2d box;
+    try {
+      fm::synth::parseYoloLine(b.line, cv::Size(100, 100), &cls, &box);
+      ADD_FAILURE() << "accepted '" << b.line << "'";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find(b.expected), std::string::npos) << e.what();
+    }
+  }
+}
+
+std::vector<std::string> lines(const std::string& path) {
+  std::ifstream f(path);
+  std::vector<std::string> out;
+  for (std::string l; std::getline(f, l);) out.push_back(l);
+  return out;
+}
+
+TEST_F(MakeDrive, DatasetHoldsImagesYoloLabelsAndClassesAndEveryCameraGetsBoxes) {
+  const std::string ds = dir_ + "/ds";
+  const ToolRun r = makeDrive("--out " + dir_ + "/d" + kRigArgs +
+                              " --duration 1 --seed 3 --moving 12 --gt-boxes all --dataset " + ds + " --dataset-every 5");
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_EQ(lines(ds + "/classes.txt"), (std::vector<std::string>{"car", "van", "truck", "bus"}));
+  EXPECT_NE(readFile(ds + "/README.txt").find("preset urban, seed 3"), std::string::npos);
+  // Frame sets 0 and 5 of 10, three cameras each.
+  const std::vector<std::string> csv = lines(ds + "/boxes.csv");
+  ASSERT_FALSE(csv.empty());
+  std::map<std::string, std::vector<std::string>> csv_rows;
+  for (size_t i = 1; i < csv.size(); ++i) csv_rows[csv[i].substr(0, csv[i].find(','))].push_back(csv[i]);
+  int labels = 0;
+  std::set<int> classes;
+  for (int set : {0, 5}) {
+    for (int c = 0; c < 3; ++c) {
+      char name[64];
+      std::snprintf(name, sizeof(name), "s3_f%05d_cam%d", set, c);
+      const cv::Mat img = cv::imread(ds + "/images/" + name + ".png", cv::IMREAD_UNCHANGED);
+      ASSERT_EQ(img.size(), cv::Size(256, 136)) << name;
+      ASSERT_EQ(img.type(), CV_8UC1);
+      const std::vector<std::string> rows = lines(ds + "/labels/" + name + ".txt");
+      ASSERT_EQ(rows.size(), csv_rows[name].size()) << name;
+      for (size_t i = 0; i < rows.size(); ++i) {
+        // The label and the pixel box in boxes.csv agree within half a pixel.
+        int cls;
+        cv::Rect2d box;
+        fm::synth::parseYoloLine(rows[i], img.size(), &cls, &box);
+        std::stringstream ss(csv_rows[name][i]);
+        std::vector<std::string> f;
+        for (std::string x; std::getline(ss, x, ',');) f.push_back(x);
+        ASSERT_EQ(f.size(), 9u);
+        EXPECT_EQ(lines(ds + "/classes.txt")[cls], f[2]);
+        EXPECT_NEAR(box.x, std::stod(f[4]), 0.5);
+        EXPECT_NEAR(box.y + box.height, std::stod(f[7]), 0.5);
+        EXPECT_GE(box.width, 4 - 1e-3);  // --dataset-min-px 4, less the inward rounding
+        EXPECT_GE(box.x, -1e-9);
+        EXPECT_LE(box.x + box.width, 256 + 1e-9);
+        classes.insert(cls);
+        ++labels;
+      }
+    }
+  }
+  EXPECT_FALSE(std::ifstream(ds + "/images/s3_f00001_cam0.png").good());
+  std::cout << labels << " labels, " << classes.size() << " classes\n";
+  EXPECT_GT(labels, 10);
+  EXPECT_GE(classes.size(), 2u);
+  // --gt-boxes all: every camera has its boxes; moving ones are also among all vehicles.
+  rosbag::Bag bag(dir_ + "/d/drive.bag");
+  std::map<std::string, int> count;
+  for (const auto& m : rosbag::View(bag)) {
+    if (auto d = m.instantiate<fisheye_mapping::Detection2DArray>()) {
+      ++count[m.getTopic()];
+      for (const auto& b : d->detections) {
+        EXPECT_GE(b.x_min, 0);
+        EXPECT_LE(b.y_max, 136);
+      }
+    }
+  }
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_EQ(count["/cam" + std::to_string(c) + "/detections_gt"], 10);
+    EXPECT_EQ(count["/cam" + std::to_string(c) + "/vehicles_gt"], 10);
+  }
+}
+
+TEST_F(MakeDrive, BadDatasetOptionsGiveClearErrors) {
+  const ToolRun every = makeDrive("--out " + dir_ + "/x" + kRigArgs + " --dataset " + dir_ + "/ds --dataset-every 0");
+  EXPECT_EQ(every.status, 2);
+  EXPECT_NE(every.output.find("--dataset-every must lie in [1, 1000], got 0"), std::string::npos) << every.output;
+  const ToolRun boxes = makeDrive("--out " + dir_ + "/x" + kRigArgs + " --gt-boxes some");
+  EXPECT_EQ(boxes.status, 2);
+  EXPECT_NE(boxes.output.find("--gt-boxes must be ref or all, got 'some'"), std::string::npos) << boxes.output;
 }
 
 }  // namespace

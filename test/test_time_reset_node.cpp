@@ -115,6 +115,7 @@ std::string playerCommand(const std::string& dir, const std::string& name, doubl
   ros::param::set("/" + name + "/hold", false);
   ros::param::set("/" + name + "/timeout", timeout);  // per frame set: a stalled stage, not the drive
   ros::param::set("/" + name + "/summary_file", dir + "/" + name + ".yaml");
+  ros::param::set("/" + name + "/done_topic", "/fisheye_mapping/tsdf/fusion_done");
   return std::string(FM_PACED_PLAYER) + " __name:=" + name + " >> " + dir + ".log 2>&1";
 }
 
@@ -143,17 +144,17 @@ TEST(TimeReset, SecondPlayOfTheBagIsProcessedByEveryStage) {
   Outputs out[2];
   // Latest status and the most severe one seen with a time reset, per stage.
   std::map<std::string, StageStatus> latest, reset_seen;
-  ros::Publisher done_pub = nh.advertise<fm::FrameDone>("/fusion_done", 20);
-  auto s1 = nh.subscribe<fm::CameraFrameSet>("/frames", 50, [&](const fm::CameraFrameSetConstPtr& m) {
+  ros::Publisher done_pub = nh.advertise<fm::FrameDone>("/fisheye_mapping/tsdf/fusion_done", 20);
+  auto s1 = nh.subscribe<fm::CameraFrameSet>("/fisheye_mapping/frames", 50, [&](const fm::CameraFrameSetConstPtr& m) {
     std::lock_guard<std::mutex> l(mu);
     out[play].frames.insert(m->header.stamp.toNSec());
   });
-  auto s2 = nh.subscribe<sensor_msgs::Image>("/depth", 50, [&](const sensor_msgs::ImageConstPtr& m) {
+  auto s2 = nh.subscribe<sensor_msgs::Image>("/fisheye_mapping/depth/image", 50, [&](const sensor_msgs::ImageConstPtr& m) {
     std::lock_guard<std::mutex> l(mu);
     out[play].depth.insert(m->header.stamp.toNSec());
   });
   // Stands in for the fusion stage: every masked depth map is "done".
-  auto s3 = nh.subscribe<sensor_msgs::Image>("/depth_masked", 50, [&](const sensor_msgs::ImageConstPtr& m) {
+  auto s3 = nh.subscribe<sensor_msgs::Image>("/fisheye_mapping/depth_masked/image", 50, [&](const sensor_msgs::ImageConstPtr& m) {
     {
       std::lock_guard<std::mutex> l(mu);
       out[play].masked.insert(m->header.stamp.toNSec());
@@ -272,16 +273,16 @@ TEST(FaultInjection, DepthManagerKilledMidDriveIsRespawnedAndMappingResumes) {
   std::mutex mu;
   std::set<uint64_t> depth, masked, done;
   std::size_t depth_msgs = 0, done_msgs = 0;
-  auto s1 = nh.subscribe<sensor_msgs::Image>("/depth", 50, [&](const sensor_msgs::ImageConstPtr& m) {
+  auto s1 = nh.subscribe<sensor_msgs::Image>("/fisheye_mapping/depth/image", 50, [&](const sensor_msgs::ImageConstPtr& m) {
     std::lock_guard<std::mutex> l(mu);
     depth.insert(m->header.stamp.toNSec());
     ++depth_msgs;
   });
-  auto s2 = nh.subscribe<sensor_msgs::Image>("/depth_masked", 50, [&](const sensor_msgs::ImageConstPtr& m) {
+  auto s2 = nh.subscribe<sensor_msgs::Image>("/fisheye_mapping/depth_masked/image", 50, [&](const sensor_msgs::ImageConstPtr& m) {
     std::lock_guard<std::mutex> l(mu);
     masked.insert(m->header.stamp.toNSec());
   });
-  auto s3 = nh.subscribe<fm::FrameDone>("/fusion_done", 50, [&](const fm::FrameDone::ConstPtr& m) {
+  auto s3 = nh.subscribe<fm::FrameDone>("/fisheye_mapping/tsdf/fusion_done", 50, [&](const fm::FrameDone::ConstPtr& m) {
     std::lock_guard<std::mutex> l(mu);
     if (m->fused) done.insert(m->header.stamp.toNSec());
     ++done_msgs;
@@ -290,8 +291,8 @@ TEST(FaultInjection, DepthManagerKilledMidDriveIsRespawnedAndMappingResumes) {
   spinner.start();
   ASSERT_TRUE(waitFor([&] { return s2.getNumPublishers() > 0 && s3.getNumPublishers() > 0; }, 60.0))
       << "the stages did not come up (no publisher of /depth_masked or /fusion_done)";
-  const int depth_pid = nodePid("/depth_manager"), detection_pid = nodePid("/detection_manager"),
-            fusion_pid = nodePid("/fusion_manager");
+  const int depth_pid = nodePid("/fisheye_mapping/depth_manager"), detection_pid = nodePid("/fisheye_mapping/detection_manager"),
+            fusion_pid = nodePid("/fisheye_mapping/fusion_manager");
   ASSERT_GT(depth_pid, 0) << "no pid for /depth_manager";
   ASSERT_GT(detection_pid, 0);
   ASSERT_GT(fusion_pid, 0);
@@ -316,12 +317,12 @@ TEST(FaultInjection, DepthManagerKilledMidDriveIsRespawnedAndMappingResumes) {
   }
   ASSERT_EQ(kill(depth_pid, SIGKILL), 0);
   const ros::WallTime killed = ros::WallTime::now();
-  std::printf("killed /depth_manager (pid %d) after %zu depth maps, %zu frame sets fused\n", depth_pid, depth_before,
+  std::printf("killed /fisheye_mapping/depth_manager (pid %d) after %zu depth maps, %zu frame sets fused\n", depth_pid, depth_before,
               done_before);
 
   // Respawned by roslaunch (a new pid registered under the same name).
   const bool respawned = waitFor([&] {
-    const int p = nodePid("/depth_manager");
+    const int p = nodePid("/fisheye_mapping/depth_manager");
     return p > 0 && p != depth_pid;
   }, 60.0);
   // Depth and fusion resume: new depth maps and fused frame sets after the kill.
@@ -348,13 +349,13 @@ TEST(FaultInjection, DepthManagerKilledMidDriveIsRespawnedAndMappingResumes) {
   std::lock_guard<std::mutex> l(mu);
   std::printf("after the kill: %zu depth maps, %zu masked, %zu fused of %zu frame sets; resumed within %.1f s\n",
               depth.size(), masked.size(), done.size(), frame_sets, resume_s);
-  EXPECT_TRUE(respawned) << "/depth_manager was not respawned";
+  EXPECT_TRUE(respawned) << "/fisheye_mapping/depth_manager was not respawned";
   EXPECT_TRUE(depth_resumed) << "the depth stage did not resume after the respawn (depth maps: " << depth_msgs
                              << ", before the kill " << depth_before << ")";
   EXPECT_TRUE(fusion_resumed) << "fusion did not resume after the depth stage's respawn";
   EXPECT_EQ(rc, 0) << "paced_player did not finish the drive; see " << dir << ".log";
-  EXPECT_EQ(nodePid("/detection_manager"), detection_pid) << "the detection manager did not keep running";
-  EXPECT_EQ(nodePid("/fusion_manager"), fusion_pid) << "the fusion manager did not keep running";
+  EXPECT_EQ(nodePid("/fisheye_mapping/detection_manager"), detection_pid) << "the detection manager did not keep running";
+  EXPECT_EQ(nodePid("/fisheye_mapping/fusion_manager"), fusion_pid) << "the fusion manager did not keep running";
   // At most a few frame sets are lost with the killed manager.
   EXPECT_GE(done.size() + 4, frame_sets);
   if (!HasFailure()) std::system(("rm -rf " + dir + " " + dir + ".log").c_str());

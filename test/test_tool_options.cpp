@@ -1,6 +1,7 @@
 // The shared option parsing of the tools (src/tools/cli.h) and the tools that
 // use it: every bad value is named with its option, gets exit status 2, and
-// the tool does no work.
+// the tool does no work; every tool answers --help with its full usage on
+// stdout (exit 0) and an unknown option with its name on stderr (exit 2).
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -8,6 +9,7 @@
 #include <cstdio>
 #include <fstream>
 #include <string>
+#include <vector>
 
 #include "cli.h"
 #include "tool_run.h"
@@ -17,7 +19,9 @@ namespace cli = fisheye_mapping::cli;
 namespace {
 
 using fisheye_mapping::test::ToolRun;
+using fisheye_mapping::test::ToolRunApart;
 using fisheye_mapping::test::runTool;
+using fisheye_mapping::test::runToolApart;
 ToolRun run(const std::string& cmd) { return runTool(cmd); }
 
 template <typename F>
@@ -113,7 +117,7 @@ TEST(ToolOptions, BadValuesAreNamedWithExitStatus2) {
       {std::string(FM_TSDF_BENCHMARK) + " --out /etc/hostname", "tsdf_benchmark: --out: /etc/hostname exists and is not a folder"},
       {std::string(FM_DEPTH_BENCHMARK) + kRig + " --repeats 2x", "depth_benchmark: --repeats needs a whole number, got '2x'"},
       {std::string(FM_DEPTH_BENCHMARK) + kRig + " --band-rows -4", "depth_benchmark: --band-rows must lie in [1, 20000], got -4"},
-      {std::string(FM_DEPTH_BENCHMARK) + kRig + " --repaets 2", "depth_benchmark: unknown argument '--repaets'"},
+      {std::string(FM_DEPTH_BENCHMARK) + kRig + " --repaets 2", "depth_benchmark: unknown option '--repaets'"},
       {std::string(FM_DEPTH_BENCHMARK) + " --camchain /tmp --mount /tmp", "depth_benchmark: --camchain: /tmp is a directory, expected a file"},
       {std::string(FM_DETECTOR_BENCHMARK) + " --config " + FM_CONFIG_DIR + "/detector/nanodet.yaml" + kRig + " --repeats 0",
        "detector_benchmark: --repeats must lie in [1, 10000], got 0"},
@@ -128,6 +132,92 @@ TEST(ToolOptions, BadValuesAreNamedWithExitStatus2) {
     const ToolRun r = run(c.cmd);
     EXPECT_EQ(r.status, 2) << c.cmd << "\n" << r.out;
     EXPECT_NE(r.out.find(c.expected), std::string::npos) << c.cmd << "\n" << r.out;
+  }
+}
+
+// Every tool sits beside tsdf_benchmark (the package's lib folder; the test
+// target depends on all of them).
+std::string tool(const std::string& name) {
+  const std::string any = FM_TSDF_BENCHMARK;
+  return any.substr(0, any.rfind('/') + 1) + name;
+}
+
+// Each tool and the options its usage must document (all it takes).
+const struct {
+  std::string name;
+  std::vector<std::string> options;
+} kTools[] = {
+    {"rig_info", {"--camchain", "--mount", "--psl", "--size", "--range", "--project", "--unproject"}},
+    {"refine_rig",
+     {"--bag", "--camchain", "--mount", "--out", "--mount-out", "--frames", "--every", "--self-masks",
+      "--refine-translation", "--min-inliers"}},
+    {"make_drive",
+     {"--out", "--camchain", "--mount", "--preset", "--seed", "--duration", "--rate", "--speed", "--moving",
+      "--jitter-ms", "--drop", "--pose-noise", "--gt-depth", "--calib-rot-deg", "--calib-trans-mm", "--gain-spread",
+      "--offset-spread", "--gamma-spread", "--vignetting", "--read-noise", "--shot-noise", "--blur",
+      "--asphalt-grain", "--clouds", "--realistic"}},
+    {"depth_eval",
+     {"synthetic", "vcharge", "vcharge-check", "--camchain", "--mount", "--out", "--preset", "--seed", "--frames",
+      "--start", "--step", "--backend", "--device", "--max-range", "--realistic", "--sweep-camchain", "--data",
+      "--camera", "--ground-z", "--label", "--depth-k", "--depth-k1", "--k"}},
+    {"depth_benchmark", {"--camchain", "--mount", "--repeats", "--device", "--backends", "--band-rows"}},
+    {"detect_image", {"--config", "--all-classes", "--grey", "--out-dir", "IMAGE"}},
+    {"detector_benchmark", {"--config", "--camchain", "--mount", "--image", "--targets", "--repeats"}},
+    {"map_accuracy", {"--cloud", "--mesh", "--ref", "--t", "--trail-tol", "--csv"}},
+    {"map_tool", {"info", "check", "convert", "--max-weight", "--min-observations"}},
+    {"offline_mapper",
+     {"--bag", "--camchain", "--mount", "--out", "--config", "--config-dir", "--detector", "--frames", "--every",
+      "--world", "--depth", "--save-depth", "--topic", "--sync", "--sync-tolerance", "--quiet", "nanodet",
+      "ground_truth"}},
+    {"paced_player",
+     {"~bag", "~camchain", "~mount", "~image_topics", "~reference_topic", "~done_topic", "~timeout",
+      "~wait_subscribers", "~start", "~require_tf", "~summary_file", "~hold"}},
+    {"plane_sweep_depth",
+     {"--camchain", "--mount", "--reference", "--config", "--set", "--image", "--mask", "--out", "--bag", "--topic",
+      "--max-sets"}},
+    {"tsdf_benchmark", {"--out", "--frames", "--threads", "--drive"}},
+};
+
+TEST(ToolOptions, HelpPrintsTheFullUsageOnStdout) {
+  for (const auto& t : kTools) {
+    for (const char* flag : {" --help", " -h"}) {
+      const ToolRunApart r = runToolApart(tool(t.name) + flag);
+      EXPECT_EQ(r.status, 0) << t.name << flag << "\n" << r.out << r.err;
+      EXPECT_EQ(r.out.rfind("usage: ", 0), 0u) << t.name << flag << "\n" << r.out;
+      EXPECT_EQ(r.err, "") << t.name << flag;
+      for (const auto& o : t.options) EXPECT_NE(r.out.find(o), std::string::npos) << t.name << ": no " << o;
+    }
+  }
+}
+
+TEST(ToolOptions, UnknownOptionsAreNamedWithExitStatus2) {
+  for (const auto& t : kTools) {
+    // depth_eval wants its mode first; map_tool its command.
+    const std::string pre = t.name == "depth_eval" ? " synthetic" : t.name == "map_tool" ? " info x.fmtsdf" : "";
+    const ToolRunApart r = runToolApart(tool(t.name) + pre + " --no-such-option");
+    EXPECT_EQ(r.status, 2) << t.name << "\n" << r.out << r.err;
+    EXPECT_EQ(r.err.rfind(t.name + ": unknown option '--no-such-option'", 0), 0u) << t.name << "\n" << r.err;
+    EXPECT_NE(r.err.find("usage: "), std::string::npos) << t.name << "\n" << r.err;
+    EXPECT_EQ(r.out, "") << t.name;
+  }
+}
+
+TEST(ToolOptions, AMissingValueNamesTheOption) {
+  const struct {
+    std::string tool, args;
+  } cases[] = {
+      {"rig_info", "--range"},          {"refine_rig", "--bag"},
+      {"make_drive", "--seed"},         {"depth_eval", "synthetic --frames"},
+      {"depth_benchmark", "--repeats"}, {"detect_image", "--config"},
+      {"detector_benchmark", "--image"}, {"map_accuracy", "--csv"},
+      {"map_tool", "--max-weight"},     {"offline_mapper", "--sync-tolerance"},
+      {"plane_sweep_depth", "--bag"},   {"tsdf_benchmark", "--drive"},
+  };
+  for (const auto& c : cases) {
+    const ToolRunApart r = runToolApart(tool(c.tool) + " " + c.args);
+    const std::string option = c.args.substr(c.args.rfind(' ') + 1);
+    EXPECT_EQ(r.status, 2) << c.tool << " " << c.args << "\n" << r.err;
+    EXPECT_EQ(r.err.rfind(c.tool + ": " + option + " needs a value\n", 0), 0u) << c.tool << "\n" << r.err;
   }
 }
 

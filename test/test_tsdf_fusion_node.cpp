@@ -1,12 +1,23 @@
 // rostest: the TsdfFusion nodelet fuses analytic fisheye depth frames whose
 // poses come over tf; mesh and cloud arrive in the map frame and lie on the
-// true surfaces; bad frames are skipped; the services save, load and clear.
+// true surfaces; bad frames are skipped and counted in /diagnostics; the
+// mesh stream keeps rviz's rules over the whole run; the services save, load
+// and clear, with relative paths under $ROS_HOME; max_range changes at run
+// time through dynamic_reconfigure.
 #include <sys/stat.h>
+#include <unistd.h>
 
+#include <cstdlib>
+#include <filesystem>
+#include <atomic>
 #include <fstream>
+#include <map>
+#include <mutex>
 #include <set>
 
 #include <cv_bridge/cv_bridge.h>
+#include <diagnostic_msgs/DiagnosticArray.h>
+#include <dynamic_reconfigure/Reconfigure.h>
 #include <gtest/gtest.h>
 #include <pcl_conversions/pcl_conversions.h>
 #include <ros/package.h>
@@ -18,6 +29,7 @@
 #include <visualization_msgs/MarkerArray.h>
 
 #include "fisheye_mapping/FilePath.h"
+#include "fisheye_mapping/FrameDone.h"
 #include "fisheye_mapping/core/sim/analytic_scene.h"
 #include "fisheye_mapping/core/camera/rig.h"
 #include "ros_test_utils.h"
@@ -38,8 +50,84 @@ fm::analytic::Scene scene() {
 
 sensor_msgs::PointCloud2ConstPtr last_cloud;
 visualization_msgs::MarkerArrayConstPtr last_mesh;
-std::set<int> on_screen;    // marker ids added and not deleted, as rviz holds them
-int mesh_protocol_errors = 0;
+
+// An independent model of what rviz's MarkerDisplay holds, fed every mesh
+// update of the run, counting each breach of its rules (rviz warns on them)
+// and every ADD that repeats the triangles already on screen (an update must
+// carry only blocks that changed).
+struct RvizModel {
+  std::mutex mutex;
+  std::map<int, std::vector<geometry_msgs::Point>> shown;  // id -> triangles on screen
+  std::set<int> deleted;                                   // deleted and not added since
+  int arrays = 0, markers = 0;
+  int duplicate_ids = 0, deleted_twice = 0, deleted_never_shown = 0, deleted_when_added = 0, unchanged_adds = 0;
+
+  void take(const visualization_msgs::MarkerArray& m) {
+    std::lock_guard<std::mutex> lock(mutex);
+    ++arrays;
+    std::set<int> in_array, added;
+    for (const auto& marker : m.markers) {
+      if (marker.action == visualization_msgs::Marker::ADD) added.insert(marker.id);
+    }
+    for (const auto& marker : m.markers) {
+      if (marker.action == visualization_msgs::Marker::DELETEALL) {
+        shown.clear();
+        deleted.clear();
+        continue;
+      }
+      ++markers;
+      if (!in_array.insert(marker.id).second) ++duplicate_ids;
+      if (marker.action == visualization_msgs::Marker::DELETE) {
+        if (added.count(marker.id)) ++deleted_when_added;
+        if (deleted.count(marker.id)) {
+          ++deleted_twice;
+        } else if (!shown.count(marker.id)) {
+          ++deleted_never_shown;
+        }
+        shown.erase(marker.id);
+        deleted.insert(marker.id);
+      } else if (marker.action == visualization_msgs::Marker::ADD) {
+        auto it = shown.find(marker.id);
+        if (it != shown.end() && it->second == marker.points) ++unchanged_adds;
+        shown[marker.id] = marker.points;
+        deleted.erase(marker.id);
+      }
+    }
+  }
+  int errors() {
+    std::lock_guard<std::mutex> lock(mutex);
+    return duplicate_ids + deleted_twice + deleted_never_shown + deleted_when_added + unchanged_adds;
+  }
+  int numArrays() {
+    std::lock_guard<std::mutex> lock(mutex);
+    return arrays;
+  }
+};
+RvizModel rviz;
+
+// The TSDF node's /diagnostics values (status "tsdf: tsdf": node, stage).
+std::mutex diag_mutex;
+std::map<std::string, std::string> diag;
+std::set<std::string> diag_names;  // every status seen (for failure messages)
+
+std::string diagNames() {
+  std::lock_guard<std::mutex> lock(diag_mutex);
+  std::string names;
+  for (const auto& n : diag_names) names += "'" + n + "' ";
+  return names;
+}
+
+std::string diagValue(const std::string& key) {
+  std::lock_guard<std::mutex> lock(diag_mutex);
+  const auto it = diag.find(key);
+  return it == diag.end() ? std::string() : it->second;
+}
+
+// Where ROS puts a node's relative files: $ROS_HOME, else ~/.ros (ROS's rule).
+std::string rosHome() {
+  const char* h = std::getenv("ROS_HOME");
+  return h && *h ? std::string(h) : std::string(std::getenv("HOME")) + "/.ros";
+}
 
 
 class TsdfFusionNode : public ::testing::Test {
@@ -47,32 +135,28 @@ class TsdfFusionNode : public ::testing::Test {
   void SetUp() override {
     const std::string dir = ros::package::getPath("fisheye_mapping") + "/test/data/";
     rig_ = fm::loadKalibrRig(dir + "small_fisheye_camchain.yaml", dir + "small_fisheye_mount.yaml");
-    depth_pub_ = nh_.advertise<sensor_msgs::Image>("depth_masked", 50);
+    depth_pub_ = nh_.advertise<sensor_msgs::Image>("depth_masked/image", 50);
     cloud_sub_ = nh_.subscribe<sensor_msgs::PointCloud2>(
-        "cloud", 2, boost::function<void(const sensor_msgs::PointCloud2ConstPtr&)>([](const auto& m) {
+        "tsdf/cloud", 2, boost::function<void(const sensor_msgs::PointCloud2ConstPtr&)>([](const auto& m) {
           last_cloud = m;
         }));
     mesh_sub_ = nh_.subscribe<visualization_msgs::MarkerArray>(
-        "mesh", 20, boost::function<void(const visualization_msgs::MarkerArrayConstPtr&)>([](const auto& m) {
-          // What rviz would hold: every marker id at most once per message,
-          // a DELETE only for an id added before (else rviz warns).
-          std::set<int> in_message;
-          for (const auto& marker : m->markers) {
-            if (marker.action == visualization_msgs::Marker::DELETEALL) {
-              on_screen.clear();
-              continue;
-            }
-            if (!in_message.insert(marker.id).second) ++mesh_protocol_errors;
-            if (marker.action == visualization_msgs::Marker::DELETE && !on_screen.erase(marker.id)) {
-              ++mesh_protocol_errors;
-            }
-            if (marker.action == visualization_msgs::Marker::ADD) on_screen.insert(marker.id);
-          }
+        "tsdf/mesh", 20, boost::function<void(const visualization_msgs::MarkerArrayConstPtr&)>([](const auto& m) {
+          rviz.take(*m);
           for (const auto& marker : m->markers) {
             if (marker.action == visualization_msgs::Marker::ADD) {
               last_mesh = m;
               break;
             }
+          }
+        }));
+    diag_sub_ = nh_.subscribe<diagnostic_msgs::DiagnosticArray>(
+        "/diagnostics", 20, boost::function<void(const diagnostic_msgs::DiagnosticArrayConstPtr&)>([](const auto& m) {
+          std::lock_guard<std::mutex> lock(diag_mutex);
+          for (const auto& st : m->status) {
+            diag_names.insert(st.name);
+            if (st.name != "tsdf: tsdf") continue;  // "<node name>: <stage>"
+            for (const auto& kv : st.values) diag[kv.key] = kv.value;
           }
         }));
     ASSERT_TRUE(waitFor([this] { return depth_pub_.getNumSubscribers() > 0; }, 30.0)) << "TsdfFusion never subscribed";
@@ -99,7 +183,7 @@ class TsdfFusionNode : public ::testing::Test {
 
   ros::NodeHandle nh_;
   ros::Publisher depth_pub_;
-  ros::Subscriber cloud_sub_, mesh_sub_;
+  ros::Subscriber cloud_sub_, mesh_sub_, diag_sub_;
   tf2_ros::TransformBroadcaster tf_;
   fm::Rig rig_;
 };
@@ -122,6 +206,21 @@ TEST_F(TsdfFusionNode, FusesFramesAndServesTheMap) {
       << "no cloud with surface points arrived";
   ros::WallDuration(1.0).sleep();  // let the last frames land
 
+  // Nothing changes any more: later publishes carry no mesh update.
+  const int arrays = rviz.numArrays();
+  ros::WallDuration(1.0).sleep();  // five publish periods
+  EXPECT_EQ(rviz.numArrays(), arrays) << "mesh updates without a change in the map";
+
+  // Diagnostics: 17 frames in, 16 fused, the 16UC1 one dropped as a bad image.
+  ASSERT_TRUE(waitFor([] { return diagValue("frames fused") == "16"; }, 5.0))
+      << "frames fused: '" << diagValue("frames fused") << "'; statuses: " << diagNames();
+  EXPECT_EQ(diagValue("inputs"), "17");
+  EXPECT_EQ(diagValue("outputs"), "16");
+  EXPECT_NE(diagValue("dropped: bad image").find(", 1 total"), std::string::npos) << diagValue("dropped: bad image");
+  EXPECT_GT(std::atof(diagValue("input rate (Hz)").c_str()), 1.0);  // 17 frames within the 10 s window
+  EXPECT_NE(diagValue("processing time last/mean/max (ms)"), "none");
+  EXPECT_EQ(diagValue("exceptions in depth callbacks"), "0");
+
   // The cloud lies on the true surfaces (within a voxel, but at box edges).
   pcl::PointCloud<pcl::PointXYZ> cloud;
   pcl::fromROSMsg(*last_cloud, cloud);
@@ -133,7 +232,17 @@ TEST_F(TsdfFusionNode, FusesFramesAndServesTheMap) {
   EXPECT_GE(near, cloud.size() * 98 / 100);
 
   ASSERT_TRUE(last_mesh != nullptr);
-  EXPECT_EQ(mesh_protocol_errors, 0) << "mesh updates repeated a marker id or deleted one never added";
+  {
+    std::lock_guard<std::mutex> lock(rviz.mutex);
+    std::cout << rviz.arrays << " mesh updates, " << rviz.markers << " markers, " << rviz.shown.size()
+              << " blocks on screen\n";
+    EXPECT_EQ(rviz.duplicate_ids, 0) << "an id twice in one update";
+    EXPECT_EQ(rviz.deleted_twice, 0) << "an id deleted twice";
+    EXPECT_EQ(rviz.deleted_never_shown, 0) << "an id deleted that was never shown";
+    EXPECT_EQ(rviz.deleted_when_added, 0) << "an id deleted in the update that adds it";
+    EXPECT_EQ(rviz.unchanged_adds, 0) << "a block re-sent with the triangles already on screen";
+    EXPECT_GT(rviz.shown.size(), 10u);
+  }
   size_t triangles = 0;
   for (const auto& m : last_mesh->markers) {
     EXPECT_EQ(m.header.frame_id, "map");
@@ -153,7 +262,7 @@ TEST_F(TsdfFusionNode, FusesFramesAndServesTheMap) {
   ros::WallDuration(0.5).sleep();
   visualization_msgs::MarkerArrayConstPtr late;
   ros::Subscriber late_sub = nh_.subscribe<visualization_msgs::MarkerArray>(
-      "mesh", 1, boost::function<void(const visualization_msgs::MarkerArrayConstPtr&)>([&late](const auto& m) {
+      "tsdf/mesh", 1, boost::function<void(const visualization_msgs::MarkerArrayConstPtr&)>([&late](const auto& m) {
         if (!late) late = m;
       }));
   ASSERT_TRUE(waitFor([&late] { return late != nullptr; }, 10.0)) << "a late subscriber got no mesh";
@@ -184,6 +293,21 @@ TEST_F(TsdfFusionNode, FusesFramesAndServesTheMap) {
   ASSERT_EQ(stat((dir + "/map.fmtsdf").c_str(), &st), 0);
   EXPECT_GT(st.st_size, 100000);
 
+  // An empty path is an error naming the problem (no file in a default place).
+  srv.request.path = "";
+  ASSERT_TRUE(ros::service::call("/tsdf/save_mesh", srv));
+  EXPECT_FALSE(srv.response.success);
+  EXPECT_NE(srv.response.message.find("empty"), std::string::npos) << srv.response.message;
+  // A relative path lands under $ROS_HOME, at the absolute path the answer gives.
+  const std::string relative = "fm_tsdf_node_test_" + std::to_string(getpid()) + ".ply";
+  const std::string expected = (std::filesystem::path(rosHome()) / relative).lexically_normal().string();
+  srv.request.path = relative;
+  ASSERT_TRUE(ros::service::call("/tsdf/save_mesh", srv));
+  EXPECT_TRUE(srv.response.success) << srv.response.message;
+  EXPECT_NE(srv.response.message.find(" " + expected + ":"), std::string::npos) << srv.response.message;
+  EXPECT_EQ(stat(expected.c_str(), &st), 0) << expected;
+  std::remove(expected.c_str());
+
   std_srvs::Trigger clear;
   ASSERT_TRUE(ros::service::call("/tsdf/clear_map", clear));
   EXPECT_TRUE(clear.response.success);
@@ -202,6 +326,65 @@ TEST_F(TsdfFusionNode, FusesFramesAndServesTheMap) {
   ASSERT_TRUE(waitFor([&] { return last_cloud && last_cloud->width * last_cloud->height == cloud.size(); }, 10.0))
       << "the loaded map does not give back the same cloud";
   std::system(("rm -rf " + dir).c_str());
+}
+
+// max_range through dynamic_reconfigure: the same frames fused again after
+// ~set_parameters max_range 3.5 leave no surface beyond 3.5 m of the camera,
+// where without a limit the scene reached past 4.5 m.
+TEST_F(TsdfFusionNode, MaxRangeChangesAtRunTime) {
+  ros::AsyncSpinner spinner(2);
+  spinner.start();
+  std::atomic<int> fused{0};
+  ros::Subscriber done_sub = nh_.subscribe<fisheye_mapping::FrameDone>(
+      "tsdf/fusion_done", 20,
+      boost::function<void(const fisheye_mapping::FrameDoneConstPtr&)>([&fused](const auto& m) { fused += m->fused; }));
+  ASSERT_TRUE(waitFor([&] { return done_sub.getNumPublishers() > 0; }, 10.0));
+  const Eigen::Vector3d eye(-1.5, 0.0, 2.5);
+  const Eigen::Isometry3d T_W_C = fm::analytic::lookAt(eye, Eigen::Vector3d(3, 0, 0.3));
+  // Clears the map, fuses 4 frames from `eye` (min_observations 3) and
+  // returns the farthest surface point from it and the number of points.
+  auto fuseFromEye = [&](double* farthest, size_t* points) {
+    std_srvs::Trigger clear;
+    ASSERT_TRUE(ros::service::call("/tsdf/clear_map", clear));
+    ASSERT_TRUE(waitFor([] { return last_cloud && last_cloud->width * last_cloud->height == 0; }, 10.0));
+    fused = 0;
+    const ros::Time t0 = ros::Time::now();
+    for (int i = 0; i < 4; ++i) {
+      playFrame(T_W_C, t0 + ros::Duration(0.1 * i));
+      ros::WallDuration(0.05).sleep();
+    }
+    ASSERT_TRUE(waitFor([&] { return fused == 4; }, 10.0)) << fused << " of 4 frames fused";
+    ASSERT_TRUE(waitFor([] { return last_cloud && last_cloud->width * last_cloud->height > 0; }, 10.0));
+    ros::WallDuration(0.6).sleep();  // the publish after the last frame
+    pcl::PointCloud<pcl::PointXYZ> cloud;
+    pcl::fromROSMsg(*last_cloud, cloud);
+    *farthest = 0;
+    for (const auto& p : cloud) *farthest = std::max(*farthest, (Eigen::Vector3d(p.x, p.y, p.z) - eye).norm());
+    *points = cloud.size();
+  };
+  double far_unlimited = 0, far_limited = 0;
+  size_t n_unlimited = 0, n_limited = 0;
+  fuseFromEye(&far_unlimited, &n_unlimited);
+  EXPECT_GT(far_unlimited, 4.5);
+
+  dynamic_reconfigure::Reconfigure rc;
+  dynamic_reconfigure::DoubleParameter max_range;
+  max_range.name = "max_range";
+  max_range.value = 3.5;
+  rc.request.config.doubles.push_back(max_range);
+  ASSERT_TRUE(ros::service::call("/tsdf/set_parameters", rc));
+  double applied = -1;
+  for (const auto& d : rc.response.config.doubles) {
+    if (d.name == "max_range") applied = d.value;
+  }
+  EXPECT_EQ(applied, 3.5);
+  fuseFromEye(&far_limited, &n_limited);
+  std::cout << "farthest surface point: " << far_unlimited << " m (" << n_unlimited << " points) without a limit, "
+            << far_limited << " m (" << n_limited << " points) with max_range 3.5 m\n";
+  EXPECT_LE(far_limited, 3.5 + 0.15);  // a surface point lies within a voxel or two of a measured range
+  EXPECT_GT(n_limited, 100u);
+  EXPECT_LT(n_limited, n_unlimited);
+  EXPECT_TRUE(waitFor([] { return diagValue("max_range (m)") == "3.5"; }, 5.0)) << diagValue("max_range (m)");
 }
 
 }  // namespace

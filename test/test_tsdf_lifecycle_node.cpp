@@ -93,9 +93,9 @@ class FusionProcess {
     ros::param::set("/" + name + "/publish_period", 0.2);
     for (const auto& kv : params) ros::param::set("/" + name + "/" + kv.first, kv.second);
     const std::vector<std::string> args = {"rosrun", "nodelet", "nodelet", "standalone", "fisheye_mapping/TsdfFusion",
-                                           "__name:=" + name, "depth:=/" + name + "/depth_in",
-                                           "fusion_done:=/" + name + "/done", "mesh:=/" + name + "/mesh",
-                                           "cloud:=/" + name + "/cloud"};
+                                           "__name:=" + name, "depth_masked/image:=/" + name + "/depth_in",
+                                           "tsdf/fusion_done:=/" + name + "/done", "tsdf/mesh:=/" + name + "/mesh",
+                                           "tsdf/cloud:=/" + name + "/cloud"};
     pid_ = fork();
     if (pid_ == 0) {
       std::vector<char*> argv;
@@ -379,7 +379,9 @@ TEST_F(TsdfLifecycle, SaveToADirectoryFailsCleanlyAndTimeResetCanClear) {
   fs::create_directory(dir_ + "/sub");
   std::string message;
   EXPECT_FALSE(callSave("tsdf_dir", dir_ + "/sub", &message));
-  EXPECT_NE(message.find("is a directory"), std::string::npos) << message;
+  // resolveOutputPath refuses it: "output path '<path>' (...) is an existing directory; ...".
+  EXPECT_NE(message.find("existing directory"), std::string::npos) << message;
+  EXPECT_NE(message.find(dir_ + "/sub"), std::string::npos) << message;
   std::vector<std::string> entries;
   for (const auto& e : fs::directory_iterator(dir_)) entries.push_back(e.path().filename().string());
   EXPECT_EQ(entries, std::vector<std::string>{"sub"});

@@ -56,27 +56,27 @@ TEST(VehicleEndToEnd, StagesStampsAndMapAccuracy) {
   std::set<std::string> depth_frames, masked_frames, mesh_frames;
   sensor_msgs::PointCloud2ConstPtr cloud;
   int mesh_msgs = 0;
-  auto s1 = nh.subscribe<fm::CameraFrameSet>("/frames", 50, [&](const fm::CameraFrameSetConstPtr& m) {
+  auto s1 = nh.subscribe<fm::CameraFrameSet>("/fisheye_mapping/frames", 50, [&](const fm::CameraFrameSetConstPtr& m) {
     std::lock_guard<std::mutex> l(mu);
     frames.insert(m->header.stamp.toNSec());
   });
-  auto s2 = nh.subscribe<sensor_msgs::Image>("/depth", 50, [&](const sensor_msgs::ImageConstPtr& m) {
+  auto s2 = nh.subscribe<sensor_msgs::Image>("/fisheye_mapping/depth/image", 50, [&](const sensor_msgs::ImageConstPtr& m) {
     std::lock_guard<std::mutex> l(mu);
     depth.insert(m->header.stamp.toNSec());
     depth_frames.insert(m->header.frame_id);
   });
-  auto s3 = nh.subscribe<sensor_msgs::Image>("/depth_masked", 50, [&](const sensor_msgs::ImageConstPtr& m) {
+  auto s3 = nh.subscribe<sensor_msgs::Image>("/fisheye_mapping/depth_masked/image", 50, [&](const sensor_msgs::ImageConstPtr& m) {
     std::lock_guard<std::mutex> l(mu);
     masked.insert(m->header.stamp.toNSec());
     masked_frames.insert(m->header.frame_id);
     masked_depth[m->header.stamp.toNSec()] = cv_bridge::toCvCopy(m)->image;
   });
-  auto s4 = nh.subscribe<visualization_msgs::MarkerArray>("/mesh", 50, [&](const visualization_msgs::MarkerArrayConstPtr& m) {
+  auto s4 = nh.subscribe<visualization_msgs::MarkerArray>("/fisheye_mapping/tsdf/mesh", 50, [&](const visualization_msgs::MarkerArrayConstPtr& m) {
     std::lock_guard<std::mutex> l(mu);
     ++mesh_msgs;
     for (const auto& k : m->markers) mesh_frames.insert(k.header.frame_id);
   });
-  auto s5 = nh.subscribe<sensor_msgs::PointCloud2>("/cloud", 5, [&](const sensor_msgs::PointCloud2ConstPtr& m) {
+  auto s5 = nh.subscribe<sensor_msgs::PointCloud2>("/fisheye_mapping/tsdf/cloud", 5, [&](const sensor_msgs::PointCloud2ConstPtr& m) {
     std::lock_guard<std::mutex> l(mu);
     cloud = m;
   });
@@ -93,6 +93,7 @@ TEST(VehicleEndToEnd, StagesStampsAndMapAccuracy) {
   ros::param::set("/e2e_player/camchain", config + "/default_camchain.yaml");
   ros::param::set("/e2e_player/mount", config + "/default_mount.yaml");
   ros::param::set("/e2e_player/hold", false);
+  ros::param::set("/e2e_player/done_topic", "/fisheye_mapping/tsdf/fusion_done");
   const std::string play = std::string(FM_PACED_PLAYER) + " __name:=e2e_player >> " + dir + ".log 2>&1";
   ASSERT_EQ(std::system(play.c_str()), 0) << play;
   ASSERT_TRUE(waitFor([&] {

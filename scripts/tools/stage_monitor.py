@@ -22,14 +22,14 @@ from rospy.msg import AnyMsg
 
 TOPICS = [
     ("/cam0/image_raw", "reference images in"),
-    ("/frames", "sync: frame sets"),
-    ("/depth", "plane sweep: depth"),
-    ("/detections", "detector: detections"),
+    ("/fisheye_mapping/frames", "sync: frame sets"),
+    ("/fisheye_mapping/depth/image", "plane sweep: depth"),
+    ("/fisheye_mapping/detections", "detector: detections"),
     ("/cam0/detections_gt", "ground-truth boxes (oracle)"),
-    ("/depth_masked", "mask: masked depth"),
-    ("/mesh", "fusion: mesh updates"),
-    ("/cloud", "fusion: cloud updates"),
-    ("/fusion_done", "fusion: depth frames finished"),
+    ("/fisheye_mapping/depth_masked/image", "mask: masked depth"),
+    ("/fisheye_mapping/tsdf/mesh", "fusion: mesh updates"),
+    ("/fisheye_mapping/tsdf/cloud", "fusion: cloud updates"),
+    ("/fisheye_mapping/tsdf/fusion_done", "fusion: depth frames finished"),
 ]
 
 
@@ -62,8 +62,8 @@ def main():
             break
         if args.progress > 0 and now - last_progress >= args.progress:
             last_progress = now
-            print(f"[{now - start:5.0f} s] frame sets {stats['/frames']['n']}, depth {stats['/depth']['n']}, "
-                  f"masked {stats['/depth_masked']['n']}, fused {stats['/fusion_done']['n']}", flush=True)
+            print(f"[{now - start:5.0f} s] frame sets {stats['/fisheye_mapping/frames']['n']}, depth {stats['/fisheye_mapping/depth/image']['n']}, "
+                  f"masked {stats['/fisheye_mapping/depth_masked/image']['n']}, fused {stats['/fisheye_mapping/tsdf/fusion_done']['n']}", flush=True)
         lasts = [s["last"] for s in stats.values() if s["last"]]
         if not lasts and now - start > args.wait_first:
             break

@@ -1,21 +1,30 @@
 // Depth mask nodelet: removes potentially moving objects from depth maps
 // before fusion (paper Sec. III-B).
 //
-// Subscribes  depth      (sensor_msgs/Image 32FC1, range along the ray, NaN invalid)
+// Topics are relative to the node's namespace (vehicle.launch: /fisheye_mapping).
+// Subscribes  depth/image (sensor_msgs/Image 32FC1, range along the ray, NaN
+//             invalid; through image_transport, ~image_transport selects the transport)
+//             depth/camera_info (optional: the depth's CameraInfo, next to depth/image)
 //             detections (fisheye_mapping/Detection2DArray of the same camera)
-//             while someone listens to an output (lazy).
-// Publishes   depth_masked (32FC1: NaN inside every box grown by ~margin_px)
-//             depth_mask   (mono8: 255 where a box removed depth)
-//             depth_masked_colour (bgr8: colour-coded masked depth, black
+//             while someone listens to an image output (lazy).
+// Publishes   through image_transport, all with the depth map's header:
+//             depth_masked/image  (32FC1: NaN inside every box grown by ~margin_px)
+//             depth_masked/mask   (mono8: 255 where a box removed depth)
+//             depth_masked/colour (bgr8: colour-coded masked depth, black
 //                          invalid; only while subscribed; ~colour_range [near, far])
-//             all with the depth map's header.
+//             depth_masked/camera_info: the latest depth/camera_info with the
+//                          masked depth's header (none until one has arrived;
+//                          masking never waits for it; said once in the log
+//                          and in the diagnostics).
 // Pairing     by exact stamp. A depth map waits up to ~wait_for_detections
 //             seconds (wall time) for its detections; then it passes through
-//             unmasked and the count of such frames is reported (warning).
+//             unmasked and is counted as a drop by reason (warning).
 //             A frame whose detections are empty passes unchanged.
 // Parameters  ~margin_px (default 10), ~wait_for_detections (default 0.5 s),
 //             ~max_pending (default 30 depth maps / detection sets),
-//             ~time_reset_threshold (s, default 1; 0: never).
+//             ~time_reset_threshold (s, default 1; 0: never), ~colour_range.
+//             All but colour_range also through dynamic_reconfigure
+//             (cfg/DepthMaskReconfigure.cfg), read by the same DepthMaskConfig::fromParams.
 // Time going backwards (depth or detection stamps back by more than the
 // threshold on their own stream, or the sim clock behind the newest stamp):
 // the pairing state, keyed on stamps, is cleared (depth maps still waiting are
@@ -24,18 +33,27 @@
 // both stamps. Without it, a bag played twice would find its detections
 // "late" (their stamps were released in the first play) and pass every depth
 // map unmasked.
-// /diagnostics: depth in, masked out, passed unmasked, late detections, time
-// resets, dropped at a reset, callback errors (WARN for a while after a reset
-// or an error; WARN while depth maps pass unmasked).
+// /diagnostics (StageMonitor, task "masking"): depth rates in / out, masking
+// time, drops by reason ("no detections in time (passed unmasked)", "queue
+// full (passed unmasked)", "queue full (detection sets)", "late detections",
+// "time reset (waiting depth maps)", "stale (old timeline)", "bad depth
+// image"), time resets, callback errors, "passed unmasked (no detections in
+// time)" (total), "camera_info" and the parameters in use.
 #include <atomic>
 #include <memory>
 #include <mutex>
 
-#include <diagnostic_updater/diagnostic_updater.h>
+#include <boost/thread/recursive_mutex.hpp>
+#include <dynamic_reconfigure/server.h>
+#include <image_transport/camera_common.h>
+#include <image_transport/image_transport.h>
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/ros.h>
+#include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
+
+#include "fisheye_mapping/DepthMaskReconfigureConfig.h"
 
 #include "fisheye_mapping/Detection2DArray.h"
 #include "fisheye_mapping/core/depth/depth_image.h"
@@ -43,50 +61,80 @@
 #include "fisheye_mapping/core/sync/frame_sync.h"
 #include "fisheye_mapping/ros/conversions.h"
 #include "fisheye_mapping/ros/ros_params.h"
-#include "fisheye_mapping/ros/stage_health.h"
+#include "fisheye_mapping/ros/stage_monitor.h"
 
 namespace fisheye_mapping {
 
 class DepthMaskNodelet : public nodelet::Nodelet {
  private:
   using Pairer = StampPairer<sensor_msgs::ImageConstPtr, Detection2DArrayConstPtr>;
+  using ReconfigureConfig = DepthMaskReconfigureConfig;
 
   void onInit() override {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
+    pnh.param<std::string>("image_transport", transport_, "raw");
+    monitor_ = std::make_unique<StageMonitor>(nh, pnh, "masking");
+    monitor_->setInputExpected(false);
     // Every masking parameter is declared once, in the core (DepthMaskConfig).
-    DepthMaskConfig cfg;
     try {
-      cfg = DepthMaskConfig::fromParams(RosParams(pnh));
+      cfg_ = DepthMaskConfig::fromParams(RosParams(pnh));
     } catch (const std::exception& e) {
-      health_.error(std::string("parameters rejected, defaults used: ") + e.what());
+      monitor_->error(std::string("parameters rejected, defaults used: ") + e.what());
       NODELET_ERROR("depth mask parameters rejected, using the defaults: %s", e.what());
     }
-    const double wait = cfg.wait_for_detections;
-    const double time_reset = cfg.time_reset_threshold;
-    margin_px_ = cfg.margin_px;
-    colour_near_ = cfg.colour_near, colour_far_ = cfg.colour_far;
-    wait_ = wait;
-    max_pending_ = std::size_t(cfg.max_pending);
-    pairer_ = std::make_unique<Pairer>(wait_, max_pending_);
-    timeline_ = std::make_unique<StreamTimeline>(2, time_reset);
-    diag_ = std::make_unique<diagnostic_updater::Updater>(nh, pnh, getName());
-    diag_->setHardwareID("depth mask");
-    diag_->add("masking", this, &DepthMaskNodelet::diagnose);
-    diag_timer_ = nh.createWallTimer(ros::WallDuration(1.0), [this](const ros::WallTimerEvent&) {
-      try {
-        diag_->force_update();
-      } catch (const std::exception& e) {
-        health_.error(std::string("diagnostics: ") + e.what());
-      }
-    });
-    auto connect = [this](const ros::SingleSubscriberPublisher&) { updateSubscription(); };
-    masked_pub_ = nh.advertise<sensor_msgs::Image>("depth_masked", 5, connect, connect);
-    mask_pub_ = nh.advertise<sensor_msgs::Image>("depth_mask", 5, connect, connect);
-    colour_pub_ = nh.advertise<sensor_msgs::Image>("depth_masked_colour", 2, connect, connect);
-    timer_ = nh.createWallTimer(ros::WallDuration(std::max(0.005, std::min(0.05, wait / 4))),
+    pairer_ = std::make_unique<Pairer>(cfg_.wait_for_detections, std::size_t(cfg_.max_pending));
+    timeline_ = std::make_unique<StreamTimeline>(2, cfg_.time_reset_threshold);
+    monitor_->setExtraReport([this](diagnostic_updater::DiagnosticStatusWrapper& stat) { report(stat); });
+    // image_transport's convention: the CameraInfo next to the (resolved, remapped) image topic.
+    info_in_topic_ = image_transport::getCameraInfoTopic(nh.resolveName("depth/image"));
+    info_pub_ = nh.advertise<sensor_msgs::CameraInfo>(
+        image_transport::getCameraInfoTopic(nh.resolveName("depth_masked/image")), 5);
+    timer_ = nh.createWallTimer(ros::WallDuration(timerPeriod(cfg_.wait_for_detections)),
                                 [this](const ros::WallTimerEvent&) { onTimer(); });
-    NODELET_INFO("depth mask: margin %.1f px, waits %.3f s for detections", margin_px_, wait);
+    reconfigure_ = std::make_unique<dynamic_reconfigure::Server<ReconfigureConfig>>(reconfigure_mutex_, pnh);
+    reconfigure_->setCallback([this](ReconfigureConfig& c, uint32_t) { onReconfigure(c); });
+    it_ = std::make_unique<image_transport::ImageTransport>(nh);
+    auto connect = [this](const image_transport::SingleSubscriberPublisher&) { updateSubscription(); };
+    masked_pub_ = it_->advertise("depth_masked/image", 5, connect, connect);
+    mask_pub_ = it_->advertise("depth_masked/mask", 5, connect, connect);
+    colour_pub_ = it_->advertise("depth_masked/colour", 2, connect, connect);
+  }
+
+  // Polls the pairing often enough that a depth map leaves close to its wait.
+  static double timerPeriod(double wait) { return std::max(0.005, std::min(0.05, wait / 4)); }
+
+  // The names are the core's (DepthMaskConfig::fromParams, checked against
+  // cfg/DepthMaskReconfigure.cfg by test_reconfigure_detection). Rejected values leave
+  // the running ones, which go back to the server.
+  void onReconfigure(ReconfigureConfig& c) {
+    dynamic_reconfigure::Config values;
+    c.__toMessage__(values);
+    std::lock_guard<std::mutex> lock(mutex_);
+    try {
+      apply(DepthMaskConfig::fromParams(ReconfigureParams(values), cfg_));
+    } catch (const std::exception& e) {
+      monitor_->error(std::string("parameters rejected: ") + e.what());
+      NODELET_ERROR("depth mask parameters rejected, keeping the running ones: %s", e.what());
+      c.margin_px = cfg_.margin_px;
+      c.wait_for_detections = cfg_.wait_for_detections;
+      c.max_pending = cfg_.max_pending;
+      c.time_reset_threshold = cfg_.time_reset_threshold;
+    }
+  }
+
+  // Called with mutex_ held (at start-up too: the server's first call). Waiting
+  // depth maps keep waiting, under the new wait.
+  void apply(const DepthMaskConfig& next) {
+    pairer_->setWait(next.wait_for_detections);
+    pairer_->setMaxPending(std::size_t(next.max_pending));
+    if (next.time_reset_threshold != cfg_.time_reset_threshold)
+      timeline_ = std::make_unique<StreamTimeline>(2, next.time_reset_threshold);
+    if (next.wait_for_detections != cfg_.wait_for_detections)
+      timer_.setPeriod(ros::WallDuration(timerPeriod(next.wait_for_detections)));
+    cfg_ = next;
+    NODELET_INFO("depth mask: margin %.1f px, waits %.3f s for detections, holds %d, time reset after %.3g s",
+                 cfg_.margin_px, cfg_.wait_for_detections, cfg_.max_pending, cfg_.time_reset_threshold);
   }
 
   void updateSubscription() {
@@ -94,21 +142,26 @@ class DepthMaskNodelet : public nodelet::Nodelet {
     try {
       subscribeIfWanted();
     } catch (const std::exception& e) {
-      health_.error(std::string("subscribing: ") + e.what());
-      NODELET_ERROR("cannot subscribe depth / detections: %s", e.what());
+      monitor_->error(std::string("subscribing: ") + e.what());
+      NODELET_ERROR("cannot subscribe depth / detections (~image_transport '%s'): %s", transport_.c_str(), e.what());
     }
   }
 
   void subscribeIfWanted() {
+    ros::NodeHandle& nh = getNodeHandle();
     const bool wanted = masked_pub_.getNumSubscribers() > 0 || mask_pub_.getNumSubscribers() > 0 ||
                         colour_pub_.getNumSubscribers() > 0;
     if (wanted && !depth_sub_) {
-      depth_sub_ = getNodeHandle().subscribe("depth", 5, &DepthMaskNodelet::onDepth, this);
-      det_sub_ = getNodeHandle().subscribe("detections", 10, &DepthMaskNodelet::onDetections, this);
+      depth_sub_ = it_->subscribe("depth/image", 5, &DepthMaskNodelet::onDepth, this,
+                                  image_transport::TransportHints(transport_));
+      det_sub_ = nh.subscribe("detections", 10, &DepthMaskNodelet::onDetections, this);
+      info_sub_ = nh.subscribe(info_in_topic_, 2, &DepthMaskNodelet::onCameraInfo, this);
     } else if (!wanted && depth_sub_) {
       depth_sub_.shutdown();
       det_sub_.shutdown();
+      info_sub_.shutdown();
     }
+    monitor_->setInputExpected(wanted);
   }
 
   static double now() { return ros::WallTime::now().toSec(); }
@@ -119,7 +172,7 @@ class DepthMaskNodelet : public nodelet::Nodelet {
   bool onTimeline(Stream stream, const ros::Time& stamp) {
     const auto ev = timeline_->observe(stream, std::int64_t(stamp.toNSec()));
     if (ev.kind == StreamTimeline::Kind::kStale) {
-      ++stale_;
+      monitor_->dropped("stale (old timeline)");
       return false;
     }
     if (ev.kind == StreamTimeline::Kind::kReset) resetTime(ev, stream == kDepth ? "depth" : "detections");
@@ -129,16 +182,13 @@ class DepthMaskNodelet : public nodelet::Nodelet {
   // Called with mutex_ held.
   void resetTime(const StreamTimeline::Event& ev, const char* what) {
     const std::size_t dropped = pairer_->pendingDepth();
-    dropped_at_reset_ += dropped;
-    // Counts carry over (they are reported as totals).
-    timed_out_before_ += pairer_->timedOut();
-    late_before_ += pairer_->late();
-    pairer_ = std::make_unique<Pairer>(wait_, max_pending_);
+    for (std::size_t i = 0; i < dropped; ++i) monitor_->dropped("time reset (waiting depth maps)");
+    pairer_ = std::make_unique<Pairer>(cfg_.wait_for_detections, std::size_t(cfg_.max_pending));
     NODELET_WARN("depth mask: time went backwards (%s) from %s s to %s s (%s); pairing reset, %zu waiting depth "
                  "map(s) dropped", what, formatStamp(ev.from_ns).c_str(), formatStamp(ev.to_ns).c_str(),
                  ev.reason.c_str(), dropped);
-    health_.timeReset(std::string(what) + " " + formatStamp(ev.from_ns) + " s -> " + formatStamp(ev.to_ns) +
-                      " s: " + ev.reason);
+    monitor_->timeReset(std::string(what) + " " + formatStamp(ev.from_ns) + " s -> " + formatStamp(ev.to_ns) +
+                        " s: " + ev.reason);
   }
 
   template <class F>
@@ -146,20 +196,20 @@ class DepthMaskNodelet : public nodelet::Nodelet {
     try {
       f();
     } catch (const std::exception& e) {
-      health_.error(std::string(what) + " at " + formatStamp(std::int64_t(stamp.toNSec())) + ": " + e.what());
+      monitor_->error(std::string(what) + " at " + formatStamp(std::int64_t(stamp.toNSec())) + ": " + e.what());
       NODELET_ERROR_THROTTLE(1.0, "%s at %.3f skipped: %s", what, stamp.toSec(), e.what());
     } catch (...) {
-      health_.error(std::string(what) + " at " + formatStamp(std::int64_t(stamp.toNSec())) + ": unknown exception");
+      monitor_->error(std::string(what) + " at " + formatStamp(std::int64_t(stamp.toNSec())) + ": unknown exception");
       NODELET_ERROR_THROTTLE(1.0, "%s at %.3f skipped: unknown exception", what, stamp.toSec());
     }
   }
 
   void onDepth(const sensor_msgs::ImageConstPtr& msg) {
-    ++depth_in_;
+    monitor_->input();
     try {
-      checkDepthImage(*msg, getNodeHandle().resolveName("depth"));
-    } catch (const ImageConversionError& e) {
-      health_.error("depth at " + formatStamp(std::int64_t(msg->header.stamp.toNSec())) + ": " + e.what());
+      checkDepthImage(*msg, getNodeHandle().resolveName("depth/image"));
+    } catch (const ImageConversionError& e) {  // the sender's fault: a drop, not a stage error
+      monitor_->dropped("bad depth image");
       NODELET_ERROR_THROTTLE(1.0, "depth at %.3f skipped: %s", msg->header.stamp.toSec(), e.what());
       return;
     }
@@ -174,12 +224,20 @@ class DepthMaskNodelet : public nodelet::Nodelet {
     std::lock_guard<std::mutex> lock(mutex_);
     guarded("detections", msg->header.stamp, [&] {
       if (!onTimeline(kDetections, msg->header.stamp)) return;
-      const auto late = pairer_->late();
+      const auto late = pairer_->late(), overflow = pairer_->detectionsDropped();
       publish(pairer_->addDetections(msg->header.stamp.toNSec(), msg, now()));
-      if (pairer_->late() != late)
-        NODELET_WARN_THROTTLE(5.0, "detections at %.3f came after their depth map had passed through (%lu so far)",
-                              msg->header.stamp.toSec(), (unsigned long)(late_before_ + pairer_->late()));
+      if (pairer_->detectionsDropped() != overflow) monitor_->dropped("queue full (detection sets)");
+      if (pairer_->late() != late) {
+        monitor_->dropped("late detections");
+        NODELET_WARN_THROTTLE(5.0, "detections at %.3f came after their depth map had passed through",
+                              msg->header.stamp.toSec());
+      }
     });
+  }
+
+  void onCameraInfo(const sensor_msgs::CameraInfoConstPtr& msg) {
+    std::lock_guard<std::mutex> lock(info_mutex_);
+    info_ = msg;
   }
 
   void onTimer() {
@@ -193,68 +251,99 @@ class DepthMaskNodelet : public nodelet::Nodelet {
     });
   }
 
-  void diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat) {
-    std::lock_guard<std::mutex> lock(mutex_);
-    stat.summary(diagnostic_msgs::DiagnosticStatus::OK, "masking");
-    const std::uint64_t unmasked = timed_out_before_ + pairer_->timedOut();
-    stat.add("depth maps in", depth_in_.load());
-    stat.add("masked depth out", masked_out_);
-    stat.add("passed unmasked (no detections in time)", unmasked);
-    stat.add("late detections", late_before_ + pairer_->late());
-    stat.add("waiting depth maps dropped at a time reset", dropped_at_reset_);
-    stat.add("stale messages dropped (old timeline)", stale_);
-    if (unmasked > last_unmasked_)
-      stat.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN, "depth maps passed unmasked (no detections in time)");
-    last_unmasked_ = unmasked;
-    health_.report(stat);
-  }
-
-  void publish(const std::vector<Pairer::Pair>& pairs) {
-    for (const auto& p : pairs) {
-      try {
-        cv::Mat depth = toDepth(*p.depth);
-        std::vector<Detection> boxes;
-        int w = depth.cols, h = depth.rows;
-        if (p.dets) {
-          StampedDetections d = fromDetectionArrayMsg(**p.dets);
-          if (d.image_width > 0 && d.image_height > 0) w = d.image_width, h = d.image_height;
-          boxes = std::move(d.detections);
-        } else {
-          NODELET_WARN_THROTTLE(5.0, "no detections for depth at %.3f within the wait; passed through unmasked "
-                                "(%lu so far)", p.depth->header.stamp.toSec(),
-                                (unsigned long)(timed_out_before_ + pairer_->timedOut()));
-        }
-        const cv::Mat mask = maskDepthBoxes(depth, boxes, float(margin_px_), w, h);
-        ++masked_out_;
-        masked_pub_.publish(toDepthMsg(p.depth->header, depth));
-        mask_pub_.publish(toImageMsg(p.depth->header, mask));  // mono8
-        if (colour_pub_.getNumSubscribers() > 0)
-          colour_pub_.publish(toImageMsg(p.depth->header, colorizeDepth(depth, colour_near_, colour_far_)));  // bgr8
-      } catch (const std::exception& e) {
-        health_.error("depth at " + formatStamp(std::int64_t(p.depth->header.stamp.toNSec())) + ": " + e.what());
-        NODELET_ERROR_THROTTLE(1.0, "depth at %.3f skipped: %s", p.depth->header.stamp.toSec(), e.what());
-      } catch (...) {
-        health_.error("depth at " + formatStamp(std::int64_t(p.depth->header.stamp.toNSec())) + ": unknown exception");
-        NODELET_ERROR_THROTTLE(1.0, "depth at %.3f skipped: unknown exception", p.depth->header.stamp.toSec());
-      }
+  // The stage's own values after StageMonitor's standard ones.
+  void report(diagnostic_updater::DiagnosticStatusWrapper& stat) {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      // Kept under its old name: tools and the time-reset rostest read it.
+      stat.add("passed unmasked (no detections in time)", unmasked_);
+      stat.addf("margin (px)", "%g", cfg_.margin_px);
+      stat.addf("wait for detections (s)", "%g", cfg_.wait_for_detections);
+      stat.add("max pending", cfg_.max_pending);
     }
+    stat.add("camera_info", cameraInfoState());
   }
 
-  double margin_px_ = 10.0, colour_near_ = 1.0, colour_far_ = 30.0;
+  std::string cameraInfoState() {
+    std::lock_guard<std::mutex> lock(info_mutex_);
+    if (!info_) return "none received on " + info_in_topic_ + ": depth_masked/camera_info not published";
+    if (!info_problem_.empty()) return info_problem_;
+    return "republished from " + info_in_topic_;
+  }
+
+  // The latest CameraInfo with the masked depth's header, when it fits the
+  // depth map; never waited for.
+  void publishCameraInfo(const sensor_msgs::Image& depth) {
+    std::lock_guard<std::mutex> lock(info_mutex_);
+    if (!info_) {
+      if (!told_no_info_)
+        NODELET_INFO("no CameraInfo on %s (yet): depth_masked/camera_info is published once one arrives",
+                     info_in_topic_.c_str());
+      told_no_info_ = true;
+      return;
+    }
+    if (info_->width != depth.width || info_->height != depth.height) {
+      info_problem_ = "not republished: " + info_in_topic_ + " is " + std::to_string(info_->width) + "x" +
+                      std::to_string(info_->height) + ", the depth " + std::to_string(depth.width) + "x" +
+                      std::to_string(depth.height);
+      NODELET_WARN_THROTTLE(10.0, "%s", info_problem_.c_str());
+      return;
+    }
+    info_problem_.clear();
+    sensor_msgs::CameraInfo out = *info_;
+    out.header = depth.header;
+    info_pub_.publish(out);
+  }
+
+  // Called with mutex_ held.
+  void publish(const std::vector<Pairer::Pair>& pairs) {
+    for (const auto& p : pairs) guarded("depth", p.depth->header.stamp, [&] { publishPair(p); });
+  }
+
+  void publishPair(const Pairer::Pair& p) {
+    const double t0 = StageStats::now();
+    cv::Mat depth = toDepth(*p.depth);
+    std::vector<Detection> boxes;
+    int w = depth.cols, h = depth.rows;
+    if (p.dets) {
+      StampedDetections d = fromDetectionArrayMsg(**p.dets);
+      if (d.image_width > 0 && d.image_height > 0) w = d.image_width, h = d.image_height;
+      boxes = std::move(d.detections);
+    } else {
+      ++unmasked_;
+      monitor_->dropped(p.queue_full ? "queue full (passed unmasked)" : "no detections in time (passed unmasked)");
+      NODELET_WARN_THROTTLE(5.0, "no detections for depth at %.3f %s; passed through unmasked (%lu so far)",
+                            p.depth->header.stamp.toSec(), p.queue_full ? "(queue full)" : "within the wait",
+                            (unsigned long)unmasked_);
+    }
+    const cv::Mat mask = maskDepthBoxes(depth, boxes, float(cfg_.margin_px), w, h);
+    masked_pub_.publish(toDepthMsg(p.depth->header, depth));
+    mask_pub_.publish(toImageMsg(p.depth->header, mask));  // mono8
+    if (colour_pub_.getNumSubscribers() > 0)
+      colour_pub_.publish(toImageMsg(p.depth->header, colorizeDepth(depth, cfg_.colour_near, cfg_.colour_far)));
+    publishCameraInfo(*p.depth);
+    monitor_->processed(StageStats::now() - t0);
+    monitor_->output();
+  }
+
+  DepthMaskConfig cfg_;  // the running parameters
+  std::string transport_, info_in_topic_;
   std::unique_ptr<Pairer> pairer_;
-  double wait_ = 0.5;
-  std::size_t max_pending_ = 30;
   std::unique_ptr<StreamTimeline> timeline_;
-  StageHealth health_;
-  std::unique_ptr<diagnostic_updater::Updater> diag_;
-  ros::WallTimer diag_timer_;
-  std::atomic<std::uint64_t> depth_in_{0};
-  std::uint64_t masked_out_ = 0, dropped_at_reset_ = 0, stale_ = 0, timed_out_before_ = 0, late_before_ = 0,
-                last_unmasked_ = 0;
-  std::mutex mutex_, connect_mutex_;
-  ros::Subscriber depth_sub_, det_sub_;
-  ros::Publisher masked_pub_, mask_pub_, colour_pub_;
+  std::uint64_t unmasked_ = 0;
+  std::mutex mutex_, connect_mutex_, info_mutex_;
+  sensor_msgs::CameraInfoConstPtr info_;
+  std::string info_problem_;
+  bool told_no_info_ = false;
+  std::unique_ptr<image_transport::ImageTransport> it_;
+  image_transport::Subscriber depth_sub_;
+  ros::Subscriber det_sub_, info_sub_;
+  image_transport::Publisher masked_pub_, mask_pub_, colour_pub_;
+  ros::Publisher info_pub_;
   ros::WallTimer timer_;
+  boost::recursive_mutex reconfigure_mutex_;
+  std::unique_ptr<dynamic_reconfigure::Server<ReconfigureConfig>> reconfigure_;
+  std::unique_ptr<StageMonitor> monitor_;  // last: its timer stops first
 };
 
 }  // namespace fisheye_mapping

@@ -1,14 +1,20 @@
 // TSDF fusion nodelet: fuses (masked) fisheye depth into the core TsdfMap.
 //
-// Subscribes  depth (sensor_msgs/Image 32FC1, range along the ray, NaN invalid)
+// Topics are relative to the node's namespace (vehicle.launch: /fisheye_mapping).
+// Subscribes  depth_masked/image (sensor_msgs/Image 32FC1, range along the ray, NaN invalid)
 //             through a tf2 MessageFilter, so a frame waits for its pose.
-// Publishes   mesh  (visualization_msgs/MarkerArray: one TRIANGLE_LIST per map
+// Publishes   tsdf/mesh  (visualization_msgs/MarkerArray: one TRIANGLE_LIST per map
 //                    block, only blocks changed since the last publish)
-//             cloud (sensor_msgs/PointCloud2: surface points, world frame)
-//             /diagnostics (frames, errors caught, lost swap blocks, saves)
-// Services    ~save_mesh, ~save_cloud, ~save_map, ~load_map (FilePath),
-//             ~clear_map (std_srvs/Trigger)
-// Parameters  see docs/nodelets.md ("fisheye_mapping/TsdfFusion").
+//             tsdf/cloud (sensor_msgs/PointCloud2: surface points, world frame)
+//             /diagnostics (StageMonitor "tsdf": rates, integration time, drops
+//                    by reason, tf failures; frames, errors caught, lost swap
+//                    blocks, saves, block counts)
+// Services    ~save_mesh, ~save_cloud, ~save_map, ~load_map (FilePath: an
+//             absolute path, or one relative to $ROS_HOME (~/.ros); empty is
+//             an error), ~clear_map (std_srvs/Trigger)
+// Parameters  see docs/nodelets.md ("fisheye_mapping/TsdfFusion"); max_range,
+//             min_observations and publish_period also through
+//             dynamic_reconfigure (cfg/TsdfFusion.cfg).
 //
 // Nothing the user built is lost: every exception in a callback is caught,
 // logged with the frame stamp and counted (the stage goes on); SIGTERM saves
@@ -16,19 +22,14 @@
 // and its previous version is kept as <path>.1; ~reload_map_on_start resumes
 // from it; a depth stamp far older than the last one (bag replayed, clock
 // reset) resets the time state and keeps the map (or clears it on request).
-#include <signal.h>
-
 #include <atomic>
 #include <cmath>
 #include <cstdio>
-#include <cstring>
 #include <filesystem>
 #include <memory>
 #include <mutex>
-#include <unordered_map>
-#include <unordered_set>
 
-#include <diagnostic_updater/diagnostic_updater.h>
+#include <dynamic_reconfigure/server.h>
 #include <message_filters/subscriber.h>
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
@@ -42,69 +43,25 @@
 
 #include "fisheye_mapping/FilePath.h"
 #include "fisheye_mapping/FrameDone.h"
+#include "fisheye_mapping/TsdfFusionConfig.h"
 #include "fisheye_mapping/core/tsdf/tsdf_map.h"
 #include "fisheye_mapping/core/tsdf/tsdf_mesher.h"
 #include "fisheye_mapping/ros/conversions.h"
+#include "fisheye_mapping/ros/mesh_markers.h"
 #include "fisheye_mapping/ros/ros_params.h"
+#include "fisheye_mapping/ros/stage_monitor.h"
+#include "fisheye_mapping/ros/tsdf_node_helpers.h"
 
 namespace fisheye_mapping {
-namespace {
 
-// SIGTERM. roscpp installs a handler for SIGINT only; a SIGTERM (kill,
-// systemd, docker stop, roslaunch's escalation) ended a nodelet manager at
-// once, without unloading its nodelets: no map saved. While a TsdfFusion lives
-// in the process and SIGTERM still has its default action, SIGTERM asks roscpp
-// to shut down exactly as its own SIGINT handler does (ros::requestShutdown
-// only sets a flag, which roscpp's poll thread acts on: async-signal-safe).
-// The manager then unloads its nodelets and the destructor below saves. The
-// last TsdfFusion to go puts the previous disposition back (the handler's code
-// lives in this library).
-std::mutex g_sigterm_mutex;
-int g_sigterm_users = 0;
-bool g_sigterm_installed = false;
-struct sigaction g_sigterm_previous;
-
-void onSigterm(int) { ros::requestShutdown(); }
-
-// Returns a description of what was done.
-std::string acquireSigterm() {
-  std::lock_guard<std::mutex> lock(g_sigterm_mutex);
-  ++g_sigterm_users;
-  if (g_sigterm_installed) return "SIGTERM handler already installed";
-  struct sigaction current;
-  if (sigaction(SIGTERM, nullptr, &current) != 0) return std::string("cannot read SIGTERM's handler: ") + std::strerror(errno);
-  if ((current.sa_flags & SA_SIGINFO) || current.sa_handler != SIG_DFL) {
-    return "SIGTERM already has a handler in this process; left as it is";
-  }
-  struct sigaction sa;
-  std::memset(&sa, 0, sizeof(sa));
-  sa.sa_handler = &onSigterm;
-  sigemptyset(&sa.sa_mask);
-  sa.sa_flags = SA_RESTART;
-  if (sigaction(SIGTERM, &sa, &g_sigterm_previous) != 0) return std::string("cannot install a SIGTERM handler: ") + std::strerror(errno);
-  g_sigterm_installed = true;
-  return "SIGTERM shuts down like SIGINT (the map is saved)";
-}
-
-void releaseSigterm() {
-  std::lock_guard<std::mutex> lock(g_sigterm_mutex);
-  if (--g_sigterm_users > 0 || !g_sigterm_installed) return;
-  struct sigaction current;
-  if (sigaction(SIGTERM, nullptr, &current) == 0 && !(current.sa_flags & SA_SIGINFO) &&
-      current.sa_handler == &onSigterm) {
-    sigaction(SIGTERM, &g_sigterm_previous, nullptr);
-  }
-  g_sigterm_installed = false;
-}
-
-}  // namespace
+using tsdf_node::acquireSigterm;
+using tsdf_node::releaseSigterm;
 
 class TsdfFusionNodelet : public nodelet::Nodelet {
  public:
   ~TsdfFusionNodelet() override {
     autosave_timer_.stop();
     timer_.stop();
-    diag_timer_.stop();
     {
       std::lock_guard<std::mutex> lock(mutex_);
       if (map_ && !save_on_shutdown_.empty()) {
@@ -124,14 +81,17 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     ros::NodeHandle& pnh = getPrivateNodeHandle();
     pnh.param("world_frame", world_frame_, std::string("map"));
     pnh.param("base_frame", base_frame_, std::string("base_link"));
-    pnh.param("save_map_on_shutdown", save_on_shutdown_, std::string());
+    std::string save_on_shutdown;
+    pnh.param("save_map_on_shutdown", save_on_shutdown, std::string());
     pnh.param("reload_map_on_start", reload_on_start_, false);
     pnh.param("autosave_period", autosave_period_, 0.0);
     pnh.param("clear_map_on_time_reset", clear_on_time_reset_, false);
     pnh.param("time_reset_threshold", time_reset_threshold_, 1.0);
-    pnh.param("output_directory", output_dir_, std::string("/tmp"));
-    double publish_period = 1.0;
-    pnh.param("publish_period", publish_period, publish_period);
+    if (pnh.hasParam("output_directory")) {
+      NODELET_WARN("~output_directory is no longer read: relative service paths resolve against $ROS_HOME (%s)",
+                   tsdf_node::rosHome().c_str());
+    }
+    pnh.param("publish_period", publish_period_, publish_period_);
     int queue_size = 10;
     pnh.param("queue_size", queue_size, queue_size);
     TsdfConfig cfg;
@@ -144,12 +104,15 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
         throw std::invalid_argument("~time_reset_threshold must be > 0 seconds, got " +
                                     std::to_string(time_reset_threshold_));
       }
-      if (!save_on_shutdown_.empty() && std::filesystem::is_directory(save_on_shutdown_)) {
-        throw std::invalid_argument("~save_map_on_shutdown '" + save_on_shutdown_ +
-                                    "' is a directory; give a file path (e.g. " + save_on_shutdown_ + "/map.fmtsdf)");
+      if (!(publish_period_ > 0.0) || !std::isfinite(publish_period_)) {
+        throw std::invalid_argument("~publish_period must be > 0 seconds, got " + std::to_string(publish_period_));
       }
+      // Relative: against $ROS_HOME, like the services' paths.
+      if (!save_on_shutdown.empty()) save_on_shutdown_ = tsdf_node::outputPath(save_on_shutdown);
       cfg = TsdfConfig::fromParams(RosParams(pnh));
       rig_ = loadRigFromParams(pnh);
+      monitor_ = std::make_unique<StageMonitor>(nh, pnh, "tsdf");
+      live_ = cfg;
       map_ = std::make_unique<TsdfMap>(cfg);
     } catch (const std::exception& e) {
       NODELET_ERROR("TSDF fusion not started: %s", e.what());
@@ -165,20 +128,22 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
       }
     });
     mesher_ = std::make_unique<TsdfMesher>(cfg.min_observations);
+    mesh_markers_ = std::make_unique<MeshMarkerStream>(world_frame_);
     if (!save_on_shutdown_.empty()) prepareShutdownPath();
     sigterm_acquired_ = true;
     NODELET_INFO("%s", acquireSigterm().c_str());
 
     tf_buffer_ = std::make_unique<tf2_ros::Buffer>(ros::Duration(30.0));
     tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_, nh);
-    depth_sub_.subscribe(nh, "depth", queue_size);
+    depth_sub_.subscribe(nh, "depth_masked/image", queue_size);
+    depth_sub_.registerCallback([this](const sensor_msgs::ImageConstPtr&) { monitor_->input(); });
     tf_filter_ = std::make_unique<tf2_ros::MessageFilter<sensor_msgs::Image>>(depth_sub_, *tf_buffer_, world_frame_,
                                                                               queue_size, nh);
     tf_filter_->registerCallback(&TsdfFusionNodelet::onDepth, this);
     tf_filter_->registerFailureCallback([this](const sensor_msgs::ImageConstPtr& msg,
                                                tf2_ros::filter_failure_reasons::FilterFailureReason reason) {
       try {
-        ++dropped_no_tf_;
+        noteTfFilterFailure(*msg, reason);
         {
           // A bag played again: its tf lies before the cache's newest data, so
           // frames fail here and never reach onDepth.
@@ -186,11 +151,6 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
           handleTimeReset(msg->header.stamp);
         }
         done(msg->header, "no transform from '" + msg->header.frame_id + "' to '" + world_frame_ + "'");
-        NODELET_WARN_THROTTLE(5.0, "depth frame at %.3f (frame '%s') dropped: no transform to '%s' (%s); %zu so far",
-                              msg->header.stamp.toSec(), msg->header.frame_id.c_str(), world_frame_.c_str(),
-                              reason == tf2_ros::filter_failure_reasons::OutTheBack ? "too old for the tf buffer"
-                                                                                    : "tf never arrived",
-                              static_cast<size_t>(dropped_no_tf_));
       } catch (const std::exception& e) {
         noteException(depth_errors_, "tf failure", msg->header.stamp, e.what());
       } catch (...) {
@@ -200,19 +160,19 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     // Only changed blocks go out on each update; a subscriber that connects
     // later (rviz started mid-drive) is first sent the whole mesh.
     mesh_pub_ = nh.advertise<visualization_msgs::MarkerArray>(
-        "mesh", 16, [this](const ros::SingleSubscriberPublisher& pub) {
-          guarded(timer_errors_, "mesh subscriber connect", [&] { pub.publish(fullMesh()); });
+        "tsdf/mesh", 16, [this](const ros::SingleSubscriberPublisher& pub) {
+          guarded(timer_errors_, "mesh subscriber connect", [&] { onMeshSubscriber(pub); });
         });
-    cloud_pub_ = nh.advertise<sensor_msgs::PointCloud2>("cloud", 2, true);
+    cloud_pub_ = nh.advertise<sensor_msgs::PointCloud2>("tsdf/cloud", 2, true);
     // One FrameDone per depth frame finished with (fused or skipped): the
     // paced bag player waits for it.
-    done_pub_ = nh.advertise<fisheye_mapping::FrameDone>("fusion_done", 100);
+    done_pub_ = nh.advertise<fisheye_mapping::FrameDone>("tsdf/fusion_done", 100);
     services_.push_back(pnh.advertiseService("save_mesh", &TsdfFusionNodelet::saveMesh, this));
     services_.push_back(pnh.advertiseService("save_cloud", &TsdfFusionNodelet::saveCloud, this));
     services_.push_back(pnh.advertiseService("save_map", &TsdfFusionNodelet::saveMap, this));
     services_.push_back(pnh.advertiseService("load_map", &TsdfFusionNodelet::loadMap, this));
     services_.push_back(pnh.advertiseService("clear_map", &TsdfFusionNodelet::clearMap, this));
-    timer_ = nh.createWallTimer(ros::WallDuration(publish_period), [this](const ros::WallTimerEvent&) {
+    timer_ = nh.createWallTimer(ros::WallDuration(publish_period_), [this](const ros::WallTimerEvent&) {
       guarded(timer_errors_, "publish timer", [this] { publish(); });
     });
     if (autosave_period_ > 0.0) {
@@ -224,15 +184,46 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
         });
       }
     }
-    diag_ = std::make_unique<diagnostic_updater::Updater>(nh, pnh, getName());
-    diag_->setHardwareID("none");
-    diag_->add("TSDF fusion", this, &TsdfFusionNodelet::diagnose);
-    diag_timer_ = nh.createWallTimer(ros::WallDuration(1.0), [this](const ros::WallTimerEvent&) {
-      guarded(timer_errors_, "diagnostics timer", [this] { diag_->force_update(); });
+    monitor_->setExtraReport([this](diagnostic_updater::DiagnosticStatusWrapper& stat) { diagnose(stat); });
+    // After the timer exists: the first callback (the start-up values) may set its period.
+    reconfigure_ = std::make_unique<dynamic_reconfigure::Server<TsdfFusionConfig>>(reconfigure_mutex_, pnh);
+    reconfigure_->setCallback([this](TsdfFusionConfig& c, uint32_t) {
+      guarded(service_errors_, "reconfigure", [&] { onReconfigure(c); });
     });
     NODELET_INFO("TSDF fusion: voxel %.3f m, truncation %.3f m, local map %.0fx%.0fx%.0f m, %s integrator",
                  cfg.voxel_size, cfg.truncation(), cfg.local_map_size.x(), cfg.local_map_size.y(), cfg.local_map_size.z(),
                  toString(cfg.integrator));
+  }
+
+  // dynamic_reconfigure (cfg/TsdfFusion.cfg): the TSDF names go through
+  // TsdfConfig::fromParams over the running config (no name mapped twice;
+  // test_reconfigure_tsdf checks the .cfg against it); publish_period is the
+  // node's own. Only what applies without rebuilding the map is in the .cfg.
+  void onReconfigure(const TsdfFusionConfig& c) {
+    dynamic_reconfigure::Config values;
+    c.__toMessage__(values);
+    const ReconfigureParams params(values);
+    std::lock_guard<std::mutex> lock(mutex_);
+    TsdfConfig next;
+    try {
+      next = TsdfConfig::fromParams(params, live_);
+    } catch (const std::exception& e) {
+      NODELET_ERROR("reconfigure rejected: %s", e.what());
+      monitor_->error(std::string("reconfigure rejected: ") + e.what());
+      return;
+    }
+    if (next.min_observations != live_.min_observations) {
+      mesher_->setMinObservations(next.min_observations);
+      mesh_markers_->markChanged(mesher_->rebuild(*map_));
+      cloud_stale_ = true;
+    }
+    map_->setMaxRange(next.max_range);
+    live_ = next;
+    double period = publish_period_;
+    params.get("publish_period", period);
+    if (period != publish_period_ && period > 0.0) timer_.setPeriod(ros::WallDuration(publish_period_ = period));
+    NODELET_INFO("reconfigured: max_range %.2f m (0: none), min_observations %d, publish_period %.2f s",
+                 live_.max_range, live_.min_observations, publish_period_);
   }
 
   // Runs fn; an exception is logged with the last frame's stamp, counted, and
@@ -250,10 +241,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
 
   void noteException(std::atomic<size_t>& counter, const char* where, const ros::Time& stamp, const std::string& what) {
     ++counter;
-    {
-      std::lock_guard<std::mutex> lock(error_mutex_);
-      last_error_ = std::string(where) + ": " + what;
-    }
+    if (monitor_) monitor_->error(std::string(where) + ": " + what);
     NODELET_ERROR("exception in the %s callback (frame stamp %.3f): %s; caught, the stage goes on (%zu so far there)",
                   where, stamp.toSec(), what.c_str(), static_cast<size_t>(counter));
   }
@@ -275,7 +263,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
             keep_previous_ = false;  // the main file is bad: the next save replaces it, .1 stays
           }
           mesher_->clear();
-          cleared_ = true;
+          cloud_stale_ = true;
           NODELET_INFO("resumed the map from %s: %zu blocks", p.c_str(), map_->numBlocks());
           return;
         } catch (const std::exception& e) {
@@ -355,7 +343,8 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
   // and keep the map, or clear it with ~clear_map_on_time_reset. mutex_ held.
   bool handleTimeReset(const ros::Time& stamp) {
     if (last_stamp_.isZero() || !(stamp + ros::Duration(time_reset_threshold_) < last_stamp_)) return false;
-    ++time_resets_;
+    monitor_->timeReset("depth stamp " + std::to_string(stamp.toSec()) + " is " +
+                        std::to_string((last_stamp_ - stamp).toSec()) + " s older than the last fused frame");
     NODELET_WARN("depth stamp %.3f is %.3f s older than the last fused frame (%.3f): time went backwards (bag played "
                  "again or clock reset); tf cache cleared, %s",
                  stamp.toSec(), (last_stamp_ - stamp).toSec(), last_stamp_.toSec(),
@@ -365,40 +354,60 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     tf_buffer_->clear();
     if (clear_on_time_reset_) {
       map_->clear();
-      mesher_->clear();
-      cleared_ = true;
+      clearMesh();
       ++changes_;
     }
     return true;
   }
 
+  // The mesher and the markers forgotten (mutex_ held): rviz gets a DELETEALL.
+  void clearMesh() {
+    mesher_->clear();
+    mesh_pub_.publish(mesh_markers_->clear());
+    cloud_stale_ = true;  // the next publish sends the (empty) cloud
+  }
+
+  // A frame the tf2 MessageFilter gave up on: a drop, and a tf failure where
+  // the pose is what is missing.
+  void noteTfFilterFailure(const sensor_msgs::Image& msg, tf2_ros::filter_failure_reasons::FilterFailureReason reason) {
+    using tf2_ros::filter_failure_reasons::EmptyFrameID;
+    using tf2_ros::filter_failure_reasons::OutTheBack;
+    if (reason == EmptyFrameID) {
+      monitor_->dropped("bad image");
+      NODELET_WARN_THROTTLE(5.0, "depth frame at %.3f has no frame_id; dropped", msg.header.stamp.toSec());
+      return;
+    }
+    const std::string why = reason == OutTheBack ? "older than the tf buffer" : "tf never arrived (or queue full)";
+    monitor_->dropped("no pose");
+    monitor_->tfFailure("'" + msg.header.frame_id + "' -> '" + world_frame_ + "' at " +
+                        std::to_string(msg.header.stamp.toSec()) + ": " + why);
+    NODELET_WARN_THROTTLE(5.0, "depth frame at %.3f (frame '%s') dropped: no transform to '%s' (%s)",
+                          msg.header.stamp.toSec(), msg.header.frame_id.c_str(), world_frame_.c_str(), why.c_str());
+  }
+
+  // The stage's own values after StageMonitor's (rates, drops, tf failures,
+  // time resets, callback errors); runs on the monitor's timer thread.
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat) {
     std::lock_guard<std::mutex> lock(mutex_);
     const size_t lost = map_->numLostBlocks(), write_failures = map_->numSwapWriteFailures();
-    const size_t errors = depth_errors_ + service_errors_ + timer_errors_;
-    stat.summary(diagnostic_msgs::DiagnosticStatus::OK, "fusing");
-    std::string problems;
-    if (errors) problems += " exceptions caught;";
-    if (lost) problems += " swapped blocks lost;";
-    if (write_failures) problems += " swap writes failed (blocks kept in RAM);";
-    if (saves_failed_) problems += " saves failed;";
-    if (time_resets_) problems += " time went backwards;";
-    if (!problems.empty()) stat.summary(diagnostic_msgs::DiagnosticStatus::WARN, problems.substr(1));
+    if (lost) stat.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN, "swapped blocks lost");
+    if (write_failures) stat.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN, "swap writes failed (blocks kept in RAM)");
+    if (saves_failed_) stat.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN, "saves failed");
     stat.add("frames fused", frames_fused_);
-    stat.add("frames dropped (no tf)", static_cast<size_t>(dropped_no_tf_));
     stat.add("exceptions in depth callbacks", static_cast<size_t>(depth_errors_));
     stat.add("exceptions in services", static_cast<size_t>(service_errors_));
     stat.add("failed service requests", static_cast<size_t>(service_failures_));
     stat.add("exceptions in timers", static_cast<size_t>(timer_errors_));
     stat.add("lost swapped blocks", lost);
     stat.add("swap write failures", write_failures);
-    stat.add("time resets", static_cast<size_t>(time_resets_));
     stat.add("blocks", map_->numBlocks());
     stat.add("active blocks", map_->numActiveBlocks());
+    stat.add("mesh blocks on screen", mesh_markers_->numShown());
     stat.add("saves to save_map_on_shutdown", static_cast<size_t>(saves_ok_));
     stat.add("failed saves", static_cast<size_t>(saves_failed_));
+    stat.add("max_range (m)", live_.max_range);
+    stat.add("min_observations", live_.min_observations);
     std::lock_guard<std::mutex> elock(error_mutex_);
-    if (!last_error_.empty()) stat.add("last exception", last_error_);
     if (!last_save_error_.empty()) stat.add("last save error", last_save_error_);
   }
 
@@ -429,9 +438,11 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
       fuse(msg, &skipped);
     } catch (const std::exception& e) {
       skipped = std::string("error: ") + e.what();
+      monitor_->dropped("error");
       noteException(depth_errors_, "depth", msg->header.stamp, e.what());
     } catch (...) {
       skipped = "error: unknown exception";
+      monitor_->dropped("error");
       noteException(depth_errors_, "depth", msg->header.stamp, "unknown exception");
     }
   }
@@ -441,6 +452,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     const int cam_index = cameraIndex(msg->header.frame_id);
     if (cam_index < 0) {
       skipped = "frame '" + msg->header.frame_id + "' is not a camera of the rig";
+      monitor_->dropped("not a rig camera");
       NODELET_WARN_THROTTLE(5.0, "depth frame '%s' is not a camera of the rig; frame skipped", msg->header.frame_id.c_str());
       return;
     }
@@ -448,6 +460,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
       checkDepthImage(*msg, getNodeHandle().resolveName("depth"));
     } catch (const ImageConversionError& e) {
       skipped = e.what();
+      monitor_->dropped("bad image");
       NODELET_WARN_THROTTLE(5.0, "%s; frame skipped", e.what());
       return;
     }
@@ -456,10 +469,12 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
       if (handleTimeReset(msg->header.stamp)) {
         // Its pose came from the tf cache of the old time line.
         skipped = "time went backwards: time state reset, frame skipped";
+        monitor_->dropped("time reset");
         return;
       }
       if (!last_stamp_.isZero() && msg->header.stamp < last_stamp_) {
         skipped = "stamp older than the last fused frame (out of order)";
+        monitor_->dropped("out of order");
         NODELET_WARN_THROTTLE(5.0, "depth stamp %.3f is older than the last fused one (%.3f) by less than %.1f s: "
                               "frame out of order, skipped",
                               msg->header.stamp.toSec(), last_stamp_.toSec(), time_reset_threshold_);
@@ -472,6 +487,8 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
       T_W_B = toIsometry(tf_buffer_->lookupTransform(world_frame_, base_frame_, msg->header.stamp));
     } catch (const tf2::TransformException& e) {
       skipped = std::string("no pose: ") + e.what();
+      monitor_->dropped("no pose");
+      monitor_->tfFailure(e.what());
       NODELET_WARN_THROTTLE(5.0, "no pose for the depth frame at %.3f: %s; frame skipped", msg->header.stamp.toSec(), e.what());
       return;
     }
@@ -480,12 +497,17 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
       depth = toDepthShare(msg);
     } catch (const ImageConversionError& e) {
       skipped = std::string("unreadable depth image: ") + e.what();
+      monitor_->dropped("bad image");
       NODELET_WARN_THROTTLE(5.0, "cannot read the depth image: %s; frame skipped", e.what());
       return;
     }
     std::lock_guard<std::mutex> lock(mutex_);
     try {
-      const auto stats = map_->integrate(depth, rig_.cameras[cam_index].model, T_W_C, T_W_B.translation());
+      const double t0 = StageStats::now();
+      const auto stats = map_->integrate(depth, rig_.cameras[cam_index].model,
+                                         T_W_C, T_W_B.translation());
+      monitor_->processed(StageStats::now() - t0);
+      monitor_->output();  // the stage's product: a frame in the map
       last_stamp_ = msg->header.stamp;
       ++frames_fused_;
       ++changes_;
@@ -498,6 +520,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
       }
     } catch (const std::invalid_argument& e) {
       skipped = e.what();
+      monitor_->dropped("rejected by the map");
       NODELET_WARN_THROTTLE(5.0, "depth frame at %.3f skipped: %s", msg->header.stamp.toSec(), e.what());
     }
   }
@@ -509,67 +532,38 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     return -1;
   }
 
+  // Every publish_period: the mesh blocks that changed, and the cloud.
   void publish() {
     std::lock_guard<std::mutex> lock(mutex_);
     if (!map_) return;
     const std::vector<BlockIndex> changed = mesher_->update(*map_);
-    if (changed.empty() && !cleared_) return;
-    const ros::Time stamp = last_stamp_.isZero() ? ros::Time::now() : last_stamp_;
-    visualization_msgs::MarkerArray markers;
-    if (cleared_) {
-      markers.markers.push_back(deleteAllMarker(world_frame_));
-      cleared_ = false;
-      marker_ids_.clear();
-      shown_.clear();
-    }
-    // One marker per changed block, once: ADD where it has triangles, DELETE
-    // only where an earlier ADD is on screen (rviz warns about deleting what
-    // it never got).
-    std::unordered_set<int> sent;
-    for (const BlockIndex& b : changed) {
-      visualization_msgs::Marker m = blockMarker(b, stamp);
-      if (!sent.insert(m.id).second) continue;
-      if (m.action == visualization_msgs::Marker::DELETE) {
-        if (!shown_.erase(m.id)) continue;
-      } else {
-        shown_.insert(m.id);
-      }
-      markers.markers.push_back(std::move(m));
-    }
+    const ros::Time stamp = meshStamp();
+    const visualization_msgs::MarkerArray markers = mesh_markers_->update(mesher_->blocks(), changed, stamp);
     if (!markers.markers.empty()) mesh_pub_.publish(markers);
+    if (changed.empty() && !cloud_stale_) return;
     cloud_pub_.publish(toCloudMsg(mesher_->surfaceCloud(), world_frame_, stamp));
+    cloud_stale_ = false;
   }
 
-  visualization_msgs::MarkerArray fullMesh() {
+  ros::Time meshStamp() const { return last_stamp_.isZero() ? ros::Time::now() : last_stamp_; }
+
+  // A late subscriber (rviz started mid-drive) gets what the others have:
+  // pending changes are sent to everyone first, then the whole mesh to it.
+  void onMeshSubscriber(const ros::SingleSubscriberPublisher& pub) {
     std::lock_guard<std::mutex> lock(mutex_);
-    if (!mesher_) return visualization_msgs::MarkerArray();
-    const ros::Time stamp = last_stamp_.isZero() ? ros::Time::now() : last_stamp_;
-    visualization_msgs::MarkerArray markers = meshToMarkerArray(
-        mesher_->blocks(), world_frame_, stamp, [this](const BlockIndex& b) { return markerId(b); });
-    for (size_t i = 1; i < markers.markers.size(); ++i) shown_.insert(markers.markers[i].id);  // [0]: DELETEALL
-    return markers;
+    if (!mesher_) return;
+    const ros::Time stamp = meshStamp();
+    const visualization_msgs::MarkerArray pending =
+        mesh_markers_->update(mesher_->blocks(), mesher_->update(*map_), stamp);
+    if (!pending.markers.empty()) mesh_pub_.publish(pending);
+    pub.publish(mesh_markers_->republishAll(mesher_->blocks(), stamp));
   }
 
-  // A marker id per block, handed out in order on first use: unique (a hash
-  // of the block index could collide and hide a block).
-  int markerId(const BlockIndex& b) const {
-    auto it = marker_ids_.find(b);
-    if (it == marker_ids_.end()) it = marker_ids_.emplace(b, static_cast<int>(marker_ids_.size())).first;
-    return it->second;
-  }
-
-  // The block's marker (ADD with its triangles, or DELETE when it has none).
-  visualization_msgs::Marker blockMarker(const BlockIndex& b, const ros::Time& stamp) const {
-    const auto it = mesher_->blocks().find(b);
-    return meshBlockMarker(it == mesher_->blocks().end() ? nullptr : &it->second, markerId(b), world_frame_, stamp);
-  }
-
-  std::string pathOr(const std::string& requested, const std::string& name) const {
-    return requested.empty() ? output_dir_ + "/" + name : requested;
-  }
-
+  // A FilePath service: `requested` resolved (relative: against $ROS_HOME;
+  // empty: an error), fn run on the absolute path under mutex_; the response
+  // and the log say what was done where, or why not.
   template <typename Fn>
-  bool run(fisheye_mapping::FilePath::Response& res, const std::string& path, const char* what, Fn fn) {
+  bool run(fisheye_mapping::FilePath::Response& res, const std::string& requested, const char* what, Fn fn) {
     std::lock_guard<std::mutex> lock(mutex_);
     if (!map_) {
       res.success = false;
@@ -577,46 +571,48 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
       return true;
     }
     try {
+      const std::string path = tsdf_node::outputPath(requested);
       fn(path);
       res.success = true;
       res.message = std::string(what) + " " + path + ": done";
       NODELET_INFO("%s", res.message.c_str());
     } catch (const std::exception& e) {
       res.success = false;
-      res.message = e.what();
+      res.message = std::string(what) + " '" + requested + "' failed: " + e.what();
       ++service_failures_;
-      NODELET_ERROR("%s %s failed (last frame stamp %.3f): %s; %zu failed requests so far", what, path.c_str(),
-                    last_stamp_.toSec(), e.what(), static_cast<size_t>(service_failures_));
+      NODELET_ERROR("%s (last frame stamp %.3f); %zu failed requests so far", res.message.c_str(),
+                    last_stamp_.toSec(), static_cast<size_t>(service_failures_));
     } catch (...) {
       res.success = false;
-      res.message = std::string(what) + " " + path + ": unknown exception";
+      res.message = std::string(what) + " '" + requested + "': unknown exception";
       noteException(service_errors_, what, last_stamp_, "unknown exception");
     }
     return true;
   }
 
+  // The exports read the mesher: bring it up to date, and let the next
+  // publish send those blocks to rviz.
   bool saveMesh(fisheye_mapping::FilePath::Request& req, fisheye_mapping::FilePath::Response& res) {
-    return run(res, pathOr(req.path, "mesh.ply"), "save mesh to", [this](const std::string& p) {
-      mesher_->update(*map_);
+    return run(res, req.path, "save mesh to", [this](const std::string& p) {
+      mesh_markers_->markChanged(mesher_->update(*map_));
       mesher_->saveMeshPly(p);
     });
   }
   bool saveCloud(fisheye_mapping::FilePath::Request& req, fisheye_mapping::FilePath::Response& res) {
-    return run(res, pathOr(req.path, "cloud.pcd"), "save cloud to", [this](const std::string& p) {
-      mesher_->update(*map_);
+    return run(res, req.path, "save cloud to", [this](const std::string& p) {
+      mesh_markers_->markChanged(mesher_->update(*map_));
       mesher_->saveCloudPcd(p);
     });
   }
   bool saveMap(fisheye_mapping::FilePath::Request& req, fisheye_mapping::FilePath::Response& res) {
-    return run(res, pathOr(req.path, "map.fmtsdf"), "save map to", [this](const std::string& p) { map_->save(p); });
+    return run(res, req.path, "save map to", [this](const std::string& p) { map_->save(p); });
   }
   bool loadMap(fisheye_mapping::FilePath::Request& req, fisheye_mapping::FilePath::Response& res) {
     // The file is read and checked whole before the live map is replaced.
-    return run(res, pathOr(req.path, "map.fmtsdf"), "load map from", [this](const std::string& p) {
+    return run(res, req.path, "load map from", [this](const std::string& p) {
       map_->load(p);
       ++changes_;
-      mesher_->clear();
-      cleared_ = true;
+      clearMesh();
     });
   }
   bool clearMap(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
@@ -624,9 +620,8 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     if (!map_) return res.success = false, res.message = "the TSDF fusion did not start", true;
     try {
       map_->clear();
-      mesher_->clear();
+      clearMesh();
       last_stamp_ = ros::Time();
-      cleared_ = true;
       ++changes_;
       res.success = true;
       res.message = "map cleared";
@@ -648,11 +643,16 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
   std::unique_ptr<tf2_ros::MessageFilter<sensor_msgs::Image>> tf_filter_;
   ros::Publisher mesh_pub_, cloud_pub_, done_pub_;
   std::vector<ros::ServiceServer> services_;
-  ros::WallTimer timer_, autosave_timer_, diag_timer_;
-  std::unique_ptr<diagnostic_updater::Updater> diag_;
-  std::string world_frame_, base_frame_, save_on_shutdown_, output_dir_;
+  ros::WallTimer timer_, autosave_timer_;
+  std::unique_ptr<StageMonitor> monitor_;
+  std::unique_ptr<MeshMarkerStream> mesh_markers_;
+  boost::recursive_mutex reconfigure_mutex_;
+  std::unique_ptr<dynamic_reconfigure::Server<TsdfFusionConfig>> reconfigure_;
+  // The run-time values (cfg/TsdfFusion.cfg) over the start-up config; mutex_.
+  TsdfConfig live_;
+  std::string world_frame_, base_frame_, save_on_shutdown_;  // save_on_shutdown_: absolute
   bool reload_on_start_ = false, clear_on_time_reset_ = false;
-  double autosave_period_ = 0.0, time_reset_threshold_ = 1.0;
+  double autosave_period_ = 0.0, time_reset_threshold_ = 1.0, publish_period_ = 1.0;
   bool sigterm_acquired_ = false;
   bool keep_previous_ = true;  // the first save to save_map_on_shutdown keeps the file found there as .1
   // Map changes (frames fused, loads, clears) and the count at the last save
@@ -664,13 +664,11 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
   size_t frames_fused_ = 0;
   // Exceptions caught per kind of callback; service_failures_: requests
   // answered with an error (bad path, bad map file).
-  std::atomic<size_t> dropped_no_tf_{0}, depth_errors_{0}, service_errors_{0}, timer_errors_{0}, service_failures_{0};
-  std::atomic<size_t> time_resets_{0}, saves_ok_{0}, saves_failed_{0};
+  std::atomic<size_t> depth_errors_{0}, service_errors_{0}, timer_errors_{0}, service_failures_{0};
+  std::atomic<size_t> saves_ok_{0}, saves_failed_{0};
   std::mutex error_mutex_;  // after mutex_ when both are taken
-  std::string last_error_, last_save_error_;
-  bool cleared_ = false;
-  mutable std::unordered_map<BlockIndex, int, BlockIndexHash> marker_ids_;  // block -> marker id
-  std::unordered_set<int> shown_;  // marker ids added and not deleted since
+  std::string last_save_error_;
+  bool cloud_stale_ = false;  // the map was cleared or loaded: send the cloud even if no block changed
 };
 
 }  // namespace fisheye_mapping

@@ -278,3 +278,26 @@ geometry_msgs::TransformStamped toTransformMsg(const Eigen::Isometry3d& T, const
 Eigen::Isometry3d toIsometry(const geometry_msgs::TransformStamped& t) { return tf2::transformToEigen(t); }
 
 }  // namespace fisheye_mapping
+
+// ---------------------------------------------------------------------------
+// Compressed images
+
+#include <opencv2/imgcodecs.hpp>
+
+namespace fisheye_mapping {
+
+cv::Mat toGrey(const sensor_msgs::CompressedImage& msg, const std::string& source) {
+  const std::string what = (source.empty() ? std::string() : source + ": ") + "compressed image (format '" +
+                           msg.format + "')";
+  // compressedDepth prefixes the PNG with a header of its own: not an image.
+  if (msg.format.find("compressedDepth") != std::string::npos)
+    throw ImageConversionError(what + " rejected: compressedDepth is a depth format, not a camera image");
+  if (msg.data.empty()) throw ImageConversionError(what + " rejected: no data");
+  const cv::Mat grey = cv::imdecode(cv::Mat(1, int(msg.data.size()), CV_8UC1, const_cast<uint8_t*>(msg.data.data())),
+                                    cv::IMREAD_GRAYSCALE);
+  if (grey.empty()) throw ImageConversionError(what + " rejected: cv::imdecode cannot decode its " +
+                                               std::to_string(msg.data.size()) + " bytes");
+  return grey;
+}
+
+}  // namespace fisheye_mapping

@@ -6,6 +6,11 @@
 // value, e.g. "--frames needs a whole number, got 'abc'" or
 // "--every must lie in [1, 1000000], got -3"; a tool prints it after its own
 // name and exits 2.
+//
+// Every tool parses its command line the same way (parseCommandLine around
+// forEachOption): -h / --help prints the full usage on stdout and exits 0; an
+// unknown option ("unknown option '--foo'"), a missing value ("--frames needs a
+// value") or a bad value prints the error and the usage on stderr and exits 2.
 #ifndef FISHEYE_MAPPING_SRC_TOOLS_CLI_H_
 #define FISHEYE_MAPPING_SRC_TOOLS_CLI_H_
 
@@ -17,6 +22,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <iostream>
 #include <limits>
 #include <sstream>
 #include <stdexcept>
@@ -33,6 +39,50 @@ class UsageError : public std::runtime_error {
  public:
   using std::runtime_error::runtime_error;
 };
+
+// -h / --help on the command line: thrown by forEachOption, turned into the
+// usage on stdout and exit status 0 by parseCommandLine.
+struct HelpRequested {};
+
+// Consumes and returns the value of the option being handled.
+using NextValue = std::function<std::string()>;
+
+// The option loop of the tools. Walks argv[first..argc): -h / --help throws
+// HelpRequested; any other argument goes to handle(arg, next), where next()
+// consumes the argument after it (UsageError "<arg> needs a value" when there is
+// none). handle returns false for an argument it does not take: one that starts
+// with '-' is an unknown option, any other an unexpected argument.
+inline void forEachOption(int argc, char** argv, int first,
+                          const std::function<bool(const std::string& arg, const NextValue& next)>& handle) {
+  for (int i = first; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "-h" || a == "--help") throw HelpRequested{};
+    const NextValue next = [&]() -> std::string {
+      if (i + 1 >= argc) throw UsageError(a + " needs a value");
+      return argv[++i];
+    };
+    if (handle(a, next)) continue;
+    if (a.size() > 1 && a[0] == '-') throw UsageError("unknown option '" + a + "'");
+    throw UsageError("unexpected argument '" + a + "'");
+  }
+}
+
+// Runs a tool's parsing and checking of its options, `parse`. Returns 0 after
+// printing `usage` on stdout when help was asked for; 2 after printing
+// "<tool>: <error>" and the usage on stderr on a UsageError; -1 when the tool
+// goes on.
+inline int parseCommandLine(const std::string& tool, const std::string& usage, const std::function<void()>& parse) {
+  try {
+    parse();
+  } catch (const HelpRequested&) {
+    std::cout << usage;
+    return 0;
+  } catch (const UsageError& e) {
+    std::cerr << tool << ": " << e.what() << "\n" << usage;
+    return 2;
+  }
+  return -1;
+}
 
 // Shortest text of a number that reads back the same ("1e+06" -> "1000000").
 inline std::string numberText(double v) {

@@ -119,22 +119,24 @@ int main(int argc, char** argv) {
   namespace cli = fm::cli;
   std::map<std::string, std::string> a;
   const char* usage =
-      "usage: depth_benchmark --camchain F --mount F [--repeats N (1 to 1000)] [--device D]\n"
-      "                       [--backends native,opencl] [--band-rows N (1 to 20000)]\n";
+      "usage: depth_benchmark --camchain F --mount F [--repeats N] [--device D]\n"
+      "                       [--backends native,opencl] [--band-rows N]\n"
+      "  --camchain F, --mount F  the rig (Kalibr camchain and mount)\n"
+      "  --repeats N              timed runs per configuration, 1 to 1000 (default 3)\n"
+      "  --device D               OpenCL device: part of its \"platform / device\" name\n"
+      "                           (default: the first GPU)\n"
+      "  --backends LIST          sweep backends to time, comma-separated, 1 to 8 names\n"
+      "                           (default native,opencl)\n"
+      "  --band-rows N            rows per band of the native backend, 1 to 20000\n"
+      "                           (default: the stage's own)\n";
   int repeats = 3, band_rows = 0;
-  try {
-    for (int i = 1; i < argc; ++i) {
-      const std::string opt = argv[i];
-      if (opt == "-h" || opt == "--help") {
-        std::cout << usage;
-        return 0;
-      }
+  const int rc = cli::parseCommandLine("depth_benchmark", usage, [&] {
+    cli::forEachOption(argc, argv, 1, [&](const std::string& opt, const cli::NextValue& next) {
       static const char* kKnown[] = {"--camchain", "--mount", "--repeats", "--device", "--backends", "--band-rows"};
-      if (std::find(std::begin(kKnown), std::end(kKnown), opt) == std::end(kKnown))
-        throw cli::UsageError("unknown argument '" + opt + "'");
-      if (i + 1 >= argc) throw cli::UsageError(opt + " needs a value");
-      a[opt.substr(2)] = argv[++i];
-    }
+      if (std::find(std::begin(kKnown), std::end(kKnown), opt) == std::end(kKnown)) return false;
+      a[opt.substr(2)] = next();
+      return true;
+    });
     if (!a.count("camchain") || !a.count("mount")) throw cli::UsageError("--camchain and --mount are required");
     cli::requireInputFile("--camchain", a["camchain"]);
     cli::requireInputFile("--mount", a["mount"]);
@@ -149,10 +151,8 @@ int main(int argc, char** argv) {
       }
       if (n == 0 || n > 8) throw cli::UsageError("--backends needs 1 to 8 names, got '" + a["backends"] + "'");
     }
-  } catch (const cli::UsageError& e) {
-    std::cerr << "depth_benchmark: " << e.what() << "\n" << usage;
-    return 2;
-  }
+  });
+  if (rc >= 0) return rc;
   try {
     const fm::Rig rig = fm::loadKalibrRig(a["camchain"], a["mount"]);
     fm::synth::WorldConfig wc;

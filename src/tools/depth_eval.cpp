@@ -34,6 +34,7 @@
 #include <iomanip>
 #include <iostream>
 #include <map>
+#include <set>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -41,6 +42,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "cli.h"
 #include "fisheye_mapping/core/eval/depth_consistency.h"
 #include "fisheye_mapping/core/depth/depth_image.h"
 #include "fisheye_mapping/core/eval/depth_error.h"
@@ -52,29 +54,50 @@ namespace fm = fisheye_mapping;
 
 namespace {
 
+const char* kUsage =
+    "usage: depth_eval synthetic --camchain F --mount F --out DIR [--preset urban|forest] [--seed N]\n"
+    "                  [--frames N] [--start S] [--step S] [--backend auto|native|opencl|cpu] [--device D]\n"
+    "                  [--max-range M] [--realistic] [--sweep-camchain F]\n"
+    "       depth_eval vcharge --data DIR --camera left|right --out DIR [--device D] [--ground-z Z]\n"
+    "                  [--label TEXT]\n"
+    "       depth_eval vcharge-check --data DIR --camera left|right --depth-k F --depth-k1 F --out DIR\n"
+    "                  [--k K] [--ground-z Z] [--label TEXT]\n"
+    "  synthetic: depth against the exact rendered range on a synthetic drive\n"
+    "    --preset P        world (default urban)       --seed N       random seed (default 1)\n"
+    "    --frames N        frames (default 8)          --start S      first frame's time (default 2 s)\n"
+    "    --step S          seconds between frames (default 1)\n"
+    "    --backend B       sweep backend (default auto) --device D    OpenCL device\n"
+    "    --max-range M     scored over pixels with a true range up to M metres (default 60)\n"
+    "    --realistic       render as a real rig (make_drive --realistic); the sweep gets the\n"
+    "                      perturbed calibration\n"
+    "    --sweep-camchain F  the sweep uses this camchain instead (e.g. refine_rig's output)\n"
+    "  vcharge: motion stereo on the V-Charge sequence in --data, checked without ground truth\n"
+    "    --ground-z Z      nominal ground height in the system frame   --label TEXT  CSV code column\n"
+    "  vcharge-check: the same checks on saved depth TIFFs of frames K (--k, default 2) and K+1\n"
+    "    (--depth-k, --depth-k1)\n";
+
 [[noreturn]] void usage(const std::string& msg) {
-  std::cerr << "depth_eval: " << msg << "\n"
-            << "usage: depth_eval synthetic --camchain F --mount F --out DIR [--preset urban|forest] [--seed N]\n"
-            << "                  [--frames N] [--start S] [--step S] [--backend auto|native|opencl|cpu] [--device D]\n"
-            << "                  [--max-range M] [--realistic] [--sweep-camchain F]\n"
-            << "       depth_eval vcharge --data DIR --camera left|right --out DIR [--device D] [--ground-z Z]\n"
-            << "                  [--label TEXT]\n"
-            << "       depth_eval vcharge-check --data DIR --camera left|right --depth-k F --depth-k1 F --out DIR\n"
-            << "                  [--k K] [--ground-z Z] [--label TEXT]\n";
+  std::cerr << "depth_eval: " << msg << "\n" << kUsage;
   std::exit(2);
 }
 
-std::map<std::string, std::string> parseArgs(int argc, char** argv, int first) {
+// The options of each mode (without "--"); all take a value but --realistic.
+const std::map<std::string, std::set<std::string>> kModeOptions = {
+    {"synthetic",
+     {"camchain", "mount", "out", "preset", "seed", "frames", "start", "step", "backend", "device", "max-range",
+      "realistic", "sweep-camchain"}},
+    {"vcharge", {"data", "camera", "out", "device", "ground-z", "label"}},
+    {"vcharge-check", {"data", "camera", "depth-k", "depth-k1", "out", "k", "ground-z", "label"}},
+};
+
+std::map<std::string, std::string> parseArgs(const std::set<std::string>& known, int argc, char** argv, int first) {
   std::map<std::string, std::string> a;
-  for (int i = first; i < argc; ++i) {
-    const std::string k = argv[i];
-    if (k == "--realistic") {  // the one option without a value
-      a["realistic"] = "true";
-      continue;
-    }
-    if (k.rfind("--", 0) != 0 || i + 1 >= argc) usage("bad argument '" + k + "'");
-    a[k.substr(2)] = argv[++i];
-  }
+  fisheye_mapping::cli::forEachOption(argc, argv, first,
+                                      [&](const std::string& k, const fisheye_mapping::cli::NextValue& next) {
+                                        if (k.rfind("--", 0) != 0 || !known.count(k.substr(2))) return false;
+                                        a[k.substr(2)] = k == "--realistic" ? "true" : next();
+                                        return true;
+                                      });
   return a;
 }
 
@@ -603,9 +626,18 @@ int runVchargeCheck(const std::map<std::string, std::string>& a) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (argc < 2) usage("missing mode");
-  const std::string mode = argv[1];
-  const auto a = parseArgs(argc, argv, 2);
+  std::string mode;
+  std::map<std::string, std::string> a;
+  const int rc = fm::cli::parseCommandLine("depth_eval", kUsage, [&] {
+    if (argc >= 2 && (std::string(argv[1]) == "-h" || std::string(argv[1]) == "--help")) throw fm::cli::HelpRequested{};
+    if (argc < 2) throw fm::cli::UsageError("missing mode");
+    mode = argv[1];
+    if (mode.size() > 1 && mode[0] == '-') throw fm::cli::UsageError("unknown option '" + mode + "' (the mode comes first)");
+    const auto known = kModeOptions.find(mode);
+    if (known == kModeOptions.end()) throw fm::cli::UsageError("unknown mode '" + mode + "'");
+    a = parseArgs(known->second, argc, argv, 2);
+  });
+  if (rc >= 0) return rc;
   try {
     if (mode == "synthetic") return runSynthetic(a);
     if (mode == "vcharge") return runVcharge(a);

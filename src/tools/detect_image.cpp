@@ -21,34 +21,30 @@ int main(int argc, char** argv) {
   std::string config, out_dir;
   bool all = false, grey = false;
   std::vector<std::string> images;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (a == "--config" && i + 1 < argc) config = argv[++i];
-    else if (a == "--out-dir" && i + 1 < argc) out_dir = argv[++i];
-    else if (a == "--all-classes") all = true;
-    else if (a == "--grey") grey = true;
-    else if (a == "--config" || a == "--out-dir") {
-      std::cerr << "detect_image: " << a << " needs a value\n";
-      return 2;
-    } else if (!a.empty() && a[0] == '-') {
-      std::cerr << "usage: detect_image --config YAML [--all-classes] [--grey] [--out-dir DIR] IMAGE...\n";
-      return 2;
-    } else images.push_back(a);
-  }
-  if (config.empty() || images.empty()) {
-    std::cerr << "detect_image: --config and at least one image are required\n";
-    return 2;
-  }
-  try {
+  const char* usage =
+      "usage: detect_image --config YAML [--all-classes] [--grey] [--out-dir DIR] IMAGE...\n"
+      "  --config YAML   the detector model (config/detector/*.yaml)\n"
+      "  --all-classes   report every class (default: the config's moving classes only)\n"
+      "  --grey          read the images as grey, as the cameras deliver them\n"
+      "  --out-dir DIR   write each image with its boxes drawn into DIR (must exist)\n";
+  const int rc = cli::parseCommandLine("detect_image", usage, [&] {
+    cli::forEachOption(argc, argv, 1, [&](const std::string& a, const cli::NextValue& next) {
+      if (a == "--config") config = next();
+      else if (a == "--out-dir") out_dir = next();
+      else if (a == "--all-classes") all = true;
+      else if (a == "--grey") grey = true;
+      else if (!a.empty() && a[0] != '-') images.push_back(a);
+      else return false;
+      return true;
+    });
+    if (config.empty() || images.empty()) throw cli::UsageError("--config and at least one image are required");
     cli::requireInputFile("--config", config);
     if (!out_dir.empty()) {
       std::error_code ec;
       if (!std::filesystem::is_directory(out_dir, ec)) throw cli::UsageError("--out-dir: " + out_dir + ": no such folder");
     }
-  } catch (const cli::UsageError& e) {
-    std::cerr << "detect_image: " << e.what() << "\n";
-    return 2;
-  }
+  });
+  if (rc >= 0) return rc;
   try {
     fm::Detector det(fm::loadDetectorConfig(config));
     int failed = 0;

@@ -29,23 +29,24 @@ int main(int argc, char** argv) {
   std::string config, camchain, mount, image_path, targets = "cpu,opencl";
   int repeats = 20;
   const char* usage =
-      "usage: detector_benchmark --config YAML --camchain F --mount F [--image PNG] "
-      "[--targets cpu,opencl] [--repeats N (1 to 10000)]\n";
-  try {
-    for (int i = 1; i < argc; ++i) {
-      const std::string a = argv[i];
-      auto next = [&]() -> std::string {
-        if (i + 1 >= argc) throw cli::UsageError(a + " needs a value");
-        return argv[++i];
-      };
+      "usage: detector_benchmark --config YAML (--camchain F --mount F | --image PNG)\n"
+      "                          [--targets cpu,opencl] [--repeats N]\n"
+      "  --config YAML         the detector model (config/detector/*.yaml)\n"
+      "  --camchain F, --mount F  the rig whose reference camera sees the rendered street\n"
+      "  --image PNG           time on this image instead of a rendered frame\n"
+      "  --targets LIST        cv::dnn targets, comma-separated, at most 16 (default cpu,opencl)\n"
+      "  --repeats N           timed runs per target, 1 to 10000 (default 20)\n";
+  const int rc = cli::parseCommandLine("detector_benchmark", usage, [&] {
+    cli::forEachOption(argc, argv, 1, [&](const std::string& a, const cli::NextValue& next) {
       if (a == "--config") config = next();
       else if (a == "--camchain") camchain = next();
       else if (a == "--mount") mount = next();
       else if (a == "--image") image_path = next();
       else if (a == "--targets") targets = next();
       else if (a == "--repeats") repeats = static_cast<int>(cli::parseInt(a, next(), 1, 10000));
-      else throw cli::UsageError("unknown argument '" + a + "'");
-    }
+      else return false;
+      return true;
+    });
     if (config.empty()) throw cli::UsageError("--config is required");
     cli::requireInputFile("--config", config);
     if (!image_path.empty()) {
@@ -62,10 +63,8 @@ int main(int argc, char** argv) {
       if (++n_targets > 16) throw cli::UsageError("--targets: at most 16 targets");
     }
     if (n_targets == 0) throw cli::UsageError("--targets needs at least one target");
-  } catch (const cli::UsageError& e) {
-    std::cerr << "detector_benchmark: " << e.what() << "\n" << usage;
-    return 2;
-  }
+  });
+  if (rc >= 0) return rc;
   try {
     if (config.empty()) throw std::runtime_error("--config is required");
     const fm::DetectorConfig cfg = fm::loadDetectorConfig(config);

@@ -9,9 +9,12 @@
 // response differences, noise, blur, fine texture): see the usage text.
 // Bag topics: /camN/image_raw (mono8), /camN/depth_gt (32FC1 range along the
 // ray, NaN for sky; reference camera only unless --gt-depth all),
-// /cam0/detections_gt (fisheye_mapping/Detection2DArray: moving vehicles in
-// the reference camera, stamped with the image), /tf (map -> base_link at
-// 100 Hz), /tf_static (base_link -> camera frames, from camchain.yaml).
+// /camN/detections_gt (fisheye_mapping/Detection2DArray: the visible extent
+// of each moving vehicle, COCO class car / truck / bus; reference camera only
+// unless --gt-boxes all), /camN/vehicles_gt (the same for every vehicle,
+// parked ones too), /tf (map -> base_link at 100 Hz), /tf_static (base_link
+// -> camera frames, from camchain.yaml). --dataset DIR also writes a YOLO
+// training set (images/, labels/, classes.txt, boxes.csv, README.txt).
 #include <unistd.h>
 
 #include <chrono>
@@ -19,10 +22,12 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <memory>
 #include <random>
 #include <string>
 
 #include <geometry_msgs/TransformStamped.h>
+#include <opencv2/imgcodecs.hpp>
 #include <rosbag/bag.h>
 #include <tf2_msgs/TFMessage.h>
 
@@ -30,6 +35,7 @@
 #include "fisheye_mapping/Detection2DArray.h"
 #include "fisheye_mapping/core/camera/rig.h"
 #include "fisheye_mapping/core/sim/synthetic_world.h"
+#include "fisheye_mapping/core/sim/vehicle_labels.h"
 #include "fisheye_mapping/ros/conversions.h"
 
 namespace fm = fisheye_mapping;
@@ -50,6 +56,14 @@ const char* kUsage =
     "  --drop P                    probability of dropping a camera image (default 0)\n"
     "  --pose-noise M              std. dev. of GNSS/INS position noise in metres (default 0)\n"
     "  --gt-depth ref|all|none     ground-truth depth topics (default ref)\n"
+    "  --gt-boxes ref|all          ground-truth boxes (/camN/detections_gt: moving vehicles,\n"
+    "                              /camN/vehicles_gt: all) for cam0 or every camera (default ref)\n"
+    "Training set:\n"
+    "  --dataset DIR               also write every camera's image and YOLO labels of every\n"
+    "                              K-th frame set to DIR (images/, labels/, classes.txt:\n"
+    "                              car van truck bus; boxes.csv; README.txt)\n"
+    "  --dataset-every K           frame sets between dataset frames, 1 to 1000 (default 10)\n"
+    "  --dataset-min-px N          smallest visible box side to label, 1 to 100 (default 4)\n"
     "Real rigs (all off by default: an exact drive):\n"
     "  --calib-rot-deg S           calibration error: rotation of each supporting camera,\n"
     "                              normal per axis with std. dev. S degrees\n"
@@ -73,7 +87,8 @@ const char* kUsage =
     "DIR/calibration_error.yaml each camera's error.\n";
 
 struct Options {
-  std::string out, camchain, mount, preset = "urban", gt_depth = "ref";
+  std::string out, camchain, mount, preset = "urban", gt_depth = "ref", gt_boxes = "ref", dataset;
+  int dataset_every = 10, dataset_min_px = 4;
   uint32_t seed = 1;
   double duration = 20, rate = 10, speed = 8, jitter_ms = 0, drop = 0, pose_noise = 0;
   int moving = 6;
@@ -112,49 +127,50 @@ constexpr int kMaxMoving = 100;             // moving vehicles
 
 Options parse(int argc, char** argv) {
   Options o;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (a == "-h" || a == "--help") {
-      std::cout << kUsage;
-      std::exit(0);
-    }
-    if (a == "--realistic") {
-      const fm::synth::Realism r = fm::synth::Realism::realistic();
-      o.calib_rot_deg = r.calib_rot_deg;
-      o.calib_trans_mm = r.calib_trans_mm;
-      o.sensors = r.sensors;
-      o.grain = r.asphalt_grain;
-      o.clouds = r.clouds;
-      continue;
-    }
-    if (i + 1 >= argc) usageError(a + " needs a value");
-    const std::string v = argv[++i];
-    if (a == "--out") o.out = v;
-    else if (a == "--camchain") o.camchain = v;
-    else if (a == "--mount") o.mount = v;
-    else if (a == "--preset") o.preset = v;
-    else if (a == "--gt-depth") o.gt_depth = v;
-    else if (a == "--seed") o.seed = static_cast<uint32_t>(integer(a, v, 0, 4294967295LL));
-    else if (a == "--duration") o.duration = number(a, v);
-    else if (a == "--rate") o.rate = number(a, v);
-    else if (a == "--speed") o.speed = number(a, v);
-    else if (a == "--moving") o.moving = static_cast<int>(integer(a, v, 0, kMaxMoving));
-    else if (a == "--jitter-ms") o.jitter_ms = number(a, v);
-    else if (a == "--drop") o.drop = number(a, v);
-    else if (a == "--pose-noise") o.pose_noise = number(a, v);
-    else if (a == "--calib-rot-deg") o.calib_rot_deg = number(a, v);
-    else if (a == "--calib-trans-mm") o.calib_trans_mm = number(a, v);
-    else if (a == "--gain-spread") o.sensors.gain = number(a, v);
-    else if (a == "--offset-spread") o.sensors.offset = number(a, v);
-    else if (a == "--gamma-spread") o.sensors.gamma = number(a, v);
-    else if (a == "--vignetting") o.sensors.base.vignetting = number(a, v);
-    else if (a == "--read-noise") o.sensors.base.read_noise = number(a, v);
-    else if (a == "--shot-noise") o.sensors.base.shot_noise = number(a, v);
-    else if (a == "--blur") o.sensors.base.blur_px = number(a, v);
-    else if (a == "--asphalt-grain") o.grain = number(a, v);
-    else if (a == "--clouds") o.clouds = number(a, v);
-    else usageError("unknown option '" + a + "'");
-  }
+  const int rc = fm::cli::parseCommandLine("make_drive", kUsage, [&] {
+    fm::cli::forEachOption(argc, argv, 1, [&](const std::string& a, const fm::cli::NextValue& next) {
+      if (a == "--realistic") {
+        const fm::synth::Realism r = fm::synth::Realism::realistic();
+        o.calib_rot_deg = r.calib_rot_deg;
+        o.calib_trans_mm = r.calib_trans_mm;
+        o.sensors = r.sensors;
+        o.grain = r.asphalt_grain;
+        o.clouds = r.clouds;
+        return true;
+      }
+      if (a == "--out") o.out = next();
+      else if (a == "--camchain") o.camchain = next();
+      else if (a == "--mount") o.mount = next();
+      else if (a == "--preset") o.preset = next();
+      else if (a == "--gt-depth") o.gt_depth = next();
+      else if (a == "--gt-boxes") o.gt_boxes = next();
+      else if (a == "--dataset") o.dataset = next();
+      else if (a == "--dataset-every") o.dataset_every = static_cast<int>(integer(a, next(), 1, 1000));
+      else if (a == "--dataset-min-px") o.dataset_min_px = static_cast<int>(integer(a, next(), 1, 100));
+      else if (a == "--seed") o.seed = static_cast<uint32_t>(integer(a, next(), 0, 4294967295LL));
+      else if (a == "--duration") o.duration = number(a, next());
+      else if (a == "--rate") o.rate = number(a, next());
+      else if (a == "--speed") o.speed = number(a, next());
+      else if (a == "--moving") o.moving = static_cast<int>(integer(a, next(), 0, kMaxMoving));
+      else if (a == "--jitter-ms") o.jitter_ms = number(a, next());
+      else if (a == "--drop") o.drop = number(a, next());
+      else if (a == "--pose-noise") o.pose_noise = number(a, next());
+      else if (a == "--calib-rot-deg") o.calib_rot_deg = number(a, next());
+      else if (a == "--calib-trans-mm") o.calib_trans_mm = number(a, next());
+      else if (a == "--gain-spread") o.sensors.gain = number(a, next());
+      else if (a == "--offset-spread") o.sensors.offset = number(a, next());
+      else if (a == "--gamma-spread") o.sensors.gamma = number(a, next());
+      else if (a == "--vignetting") o.sensors.base.vignetting = number(a, next());
+      else if (a == "--read-noise") o.sensors.base.read_noise = number(a, next());
+      else if (a == "--shot-noise") o.sensors.base.shot_noise = number(a, next());
+      else if (a == "--blur") o.sensors.base.blur_px = number(a, next());
+      else if (a == "--asphalt-grain") o.grain = number(a, next());
+      else if (a == "--clouds") o.clouds = number(a, next());
+      else return false;
+      return true;
+    });
+  });
+  if (rc >= 0) std::exit(rc);
   if (o.out.empty() || o.camchain.empty() || o.mount.empty()) usageError("--out, --camchain and --mount are required");
   if (!(o.rate > 0)) usageError("--rate must be positive, got " + std::to_string(o.rate));
   if (!(o.duration > 0)) usageError("--duration must be positive, got " + std::to_string(o.duration));
@@ -175,6 +191,7 @@ Options parse(int argc, char** argv) {
   if (o.drop < 0 || o.drop >= 1) usageError("--drop must lie in [0, 1)");
   if (o.pose_noise < 0 || o.pose_noise > 100) usageError("--pose-noise must lie in [0, 100] m");
   if (o.gt_depth != "ref" && o.gt_depth != "all" && o.gt_depth != "none") usageError("--gt-depth must be ref, all or none");
+  if (o.gt_boxes != "ref" && o.gt_boxes != "all") usageError("--gt-boxes must be ref or all, got '" + o.gt_boxes + "'");
   if (o.calib_rot_deg < 0 || o.calib_rot_deg > 10) usageError("--calib-rot-deg must lie in [0, 10]");
   if (o.calib_trans_mm < 0 || o.calib_trans_mm > 500) usageError("--calib-trans-mm must lie in [0, 500]");
   if (o.sensors.gain < 0 || o.sensors.gain >= 1) usageError("--gain-spread must lie in [0, 1)");
@@ -189,6 +206,79 @@ Options parse(int argc, char** argv) {
   if (o.clouds < 0 || o.clouds > 1) usageError("--clouds must lie in [0, 1]");
   return o;
 }
+
+// Smallest visible vehicle (pixels) given a ground-truth box in the bag.
+constexpr int kMinGtPixels = 30;
+
+// The ground-truth boxes of one image: moving vehicles only (the oracle masks
+// them) or every vehicle.
+std::vector<fm::Detection> truthBoxes(const fm::synth::World& world, const std::vector<fm::synth::VisibleBox>& boxes,
+                                      bool moving_only) {
+  std::vector<fm::Detection> dets;
+  for (const auto& b : boxes) {
+    if (b.pixels < kMinGtPixels || (moving_only && !world.isMoving(b.id))) continue;
+    const fm::synth::VehicleKind kind = world.vehicleModel(b.id).dims().kind;
+    fm::Detection d;
+    d.x_min = b.box.x, d.y_min = b.box.y;
+    d.x_max = b.box.x + b.box.width, d.y_max = b.box.y + b.box.height;
+    d.class_id = fm::synth::cocoId(kind);
+    d.class_name = fm::synth::cocoName(kind);
+    d.score = 1.0f;
+    dets.push_back(d);
+  }
+  return dets;
+}
+
+// A YOLO training set: images/NAME.png, labels/NAME.txt (one line per
+// vehicle whose visible box is at least min_px on each side; an empty file for
+// an image without one), classes.txt, boxes.csv (every labelled box with its
+// vehicle id, whether it moves and its visible pixels) and README.txt.
+class DatasetWriter {
+ public:
+  DatasetWriter(const Options& o, int argc, char** argv) : dir_(o.dataset), min_px_(o.dataset_min_px), seed_(o.seed) {
+    for (const char* sub : {"/images", "/labels"}) std::filesystem::create_directories(dir_ + sub);
+    std::ofstream classes(dir_ + "/classes.txt");
+    for (int k = 0; k < fm::synth::kNumVehicleKinds; ++k) classes << fm::synth::kindName(fm::synth::VehicleKind(k)) << "\n";
+    std::ofstream readme(dir_ + "/README.txt");
+    readme << "make_drive training set: preset " << o.preset << ", seed " << o.seed << ", every " << o.dataset_every
+           << " frame sets, boxes of at least " << min_px_ << " px a side\n"
+           << "labels: YOLO 'class cx cy w h' normalised by the image size; classes.txt: 0 car, 1 van, 2 truck, 3 bus\n"
+           << "COCO names for a COCO model: car -> car, van -> car, truck -> truck, bus -> bus\ncommand:";
+    for (int i = 0; i < argc; ++i) readme << " " << argv[i];
+    readme << "\n";
+    csv_.open(dir_ + "/boxes.csv");
+    csv_ << "image,vehicle,class,moving,x_min,y_min,x_max,y_max,pixels\n";
+    if (!classes || !readme || !csv_) throw std::runtime_error("cannot write the dataset in " + dir_);
+  }
+  void add(const fm::synth::World& world, int set, size_t cam, const cv::Mat& image,
+           const std::vector<fm::synth::VisibleBox>& boxes) {
+    char name[64];
+    std::snprintf(name, sizeof(name), "s%u_f%05d_cam%zu", seed_, set, cam);
+    if (!cv::imwrite(dir_ + "/images/" + name + ".png", image)) throw std::runtime_error("cannot write " + dir_ + "/images/" + name + ".png");
+    std::ofstream labels(dir_ + "/labels/" + name + ".txt");
+    for (const auto& b : boxes) {
+      if (b.box.width < min_px_ || b.box.height < min_px_) continue;
+      const int kind = static_cast<int>(world.vehicleModel(b.id).dims().kind);
+      labels << fm::synth::yoloLine(kind, b.box, image.size()) << "\n";
+      csv_ << name << "," << b.id << "," << fm::synth::kindName(fm::synth::VehicleKind(kind)) << ","
+           << (world.isMoving(b.id) ? 1 : 0) << "," << b.box.x << "," << b.box.y << "," << b.box.x + b.box.width << ","
+           << b.box.y + b.box.height << "," << b.pixels << "\n";
+      ++labels_;
+    }
+    if (!labels || !csv_) throw std::runtime_error("cannot write the labels of " + std::string(name) + " in " + dir_);
+    ++images_;
+  }
+  std::string summary() const {
+    return std::to_string(images_) + " images, " + std::to_string(labels_) + " labelled vehicles -> " + dir_;
+  }
+
+ private:
+  std::string dir_;
+  int min_px_;
+  uint32_t seed_;
+  std::ofstream csv_;
+  size_t images_ = 0, labels_ = 0;
+};
 
 }  // namespace
 
@@ -274,6 +364,8 @@ int main(int argc, char** argv) {
       bag.write("/tf", t0 + ros::Duration(t), m);
     }
 
+    std::unique_ptr<DatasetWriter> dataset;
+    if (!opt.dataset.empty()) dataset = std::make_unique<DatasetWriter>(opt, argc, argv);
     std::vector<std::vector<Eigen::Vector3f>> rays;
     for (const auto& cam : rig.cameras) rays.push_back(fm::pixelRays(cam.model));
     const auto wall_start = std::chrono::steady_clock::now();
@@ -302,31 +394,17 @@ int main(int argc, char** argv) {
         if (opt.gt_depth == "all" || (opt.gt_depth == "ref" && c == 0)) {
           bag.write(ns + "/depth_gt", header.stamp, fm::toDepthMsg(header, frame.depth));
         }
-        if (c == 0) {
-          // Visible extent of each moving vehicle in the reference image.
-          std::vector<fm::Detection> dets;
-          std::vector<cv::Rect> boxes(world.numVehicles());
-          std::vector<int> counts(world.numVehicles(), 0);
-          for (int v = 0; v < frame.ids.rows; ++v) {
-            const int16_t* ids = frame.ids.ptr<int16_t>(v);
-            for (int u = 0; u < frame.ids.cols; ++u) {
-              if (ids[u] < 0) continue;
-              cv::Rect& b = boxes[ids[u]];
-              b = counts[ids[u]]++ ? (b | cv::Rect(u, v, 1, 1)) : cv::Rect(u, v, 1, 1);
-            }
+        const bool boxes_here = opt.gt_boxes == "all" || c == 0;
+        const bool dataset_here = dataset && s % opt.dataset_every == 0;
+        if (boxes_here || dataset_here) {
+          // Visible extents, from the rendered ids: occlusion and the image edge included.
+          const auto boxes = fm::synth::visibleBoxes(frame.ids, world.numVehicleIds(), 1);
+          if (boxes_here) {
+            const int w = cam.model.width(), h = cam.model.height();
+            bag.write(ns + "/detections_gt", header.stamp, fm::toDetectionArrayMsg(header, w, h, truthBoxes(world, boxes, true)));
+            bag.write(ns + "/vehicles_gt", header.stamp, fm::toDetectionArrayMsg(header, w, h, truthBoxes(world, boxes, false)));
           }
-          for (int i = 0; i < world.numVehicles(); ++i) {
-            if (counts[i] < 30) continue;
-            fm::Detection d;
-            d.x_min = boxes[i].x, d.y_min = boxes[i].y;
-            d.x_max = boxes[i].x + boxes[i].width, d.y_max = boxes[i].y + boxes[i].height;
-            d.class_id = 2;  // COCO "car"
-            d.class_name = "car";
-            d.score = 1.0f;
-            dets.push_back(d);
-          }
-          bag.write(ns + "/detections_gt", header.stamp,
-                    fm::toDetectionArrayMsg(header, cam.model.width(), cam.model.height(), dets));
+          if (dataset_here) dataset->add(world, s, c, frame.image, boxes);
         }
       }
       const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count();
@@ -342,6 +420,7 @@ int main(int argc, char** argv) {
     std::printf("make_drive: %s preset, seed %u: %d frame sets x %zu cameras (%zu images written, %zu dropped) "
                 "rendered and written in %.1f s -> %s\n",
                 opt.preset.c_str(), opt.seed, n_sets, rig.cameras.size(), images, dropped, elapsed, bag_path.c_str());
+    if (dataset) std::printf("make_drive: dataset: %s\n", dataset->summary().c_str());
   } catch (const fm::CalibrationError& e) {
     std::cerr << "make_drive: " << e.what() << "\n";
     return 2;

@@ -68,7 +68,16 @@ double share(const std::vector<float>& d, float t) { return fm::shareWithin(d, t
 
 const char* kUsage =
     "usage: map_accuracy --cloud MAP.pcd [--mesh SCENE.ply] [--ref REF.pcd] [--t 0.05,0.1,...]\n"
-    "                    [--trail-tol M] [--csv OUT.csv]\n";
+    "                    [--trail-tol M] [--csv OUT.csv]\n"
+    "  --cloud MAP.pcd   the map's cloud (required)\n"
+    "  --mesh SCENE.ply  share of map points within t of this scene mesh\n"
+    "  --ref REF.pcd     accuracy and completeness against this reference cloud\n"
+    "                    (e.g. the map fused from ground-truth depth); at least one of\n"
+    "                    --mesh, --ref\n"
+    "  --t LIST          thresholds t in metres, comma-separated (default 0.05,0.1,0.25,0.5)\n"
+    "  --trail-tol M     with --mesh: count map points farther than M from the scene\n"
+    "                    (trail voxels; default 0: not counted)\n"
+    "  --csv OUT.csv     also write the figures as CSV\n";
 
 }  // namespace
 
@@ -76,25 +85,17 @@ int main(int argc, char** argv) {
   std::string cloud_path, mesh_path, ref_path, csv_path;
   std::vector<double> thresholds{0.05, 0.1, 0.25, 0.5};
   float trail_tol = 0.f;
-  try {
-    for (int i = 1; i < argc; ++i) {
-      const std::string a = argv[i];
-      if (a == "-h" || a == "--help") {
-        std::cout << kUsage;
-        return 0;
-      }
-      if (a != "--cloud" && a != "--mesh" && a != "--ref" && a != "--t" && a != "--trail-tol" && a != "--csv") {
-        throw cli::UsageError("unknown argument '" + a + "'");
-      }
-      if (i + 1 >= argc) throw cli::UsageError(a + " needs a value");
-      const std::string v = argv[++i];
-      if (a == "--cloud") cloud_path = v;
-      else if (a == "--mesh") mesh_path = v;
-      else if (a == "--ref") ref_path = v;
-      else if (a == "--t") thresholds = cli::parseDoubleList(a, v, 1e-6, 1e3);
-      else if (a == "--trail-tol") trail_tol = static_cast<float>(cli::parseDouble(a, v, 0.0, 1e3));
-      else if (a == "--csv") csv_path = v;
-    }
+  const int rc = cli::parseCommandLine("map_accuracy", kUsage, [&] {
+    cli::forEachOption(argc, argv, 1, [&](const std::string& a, const cli::NextValue& next) {
+      if (a == "--cloud") cloud_path = next();
+      else if (a == "--mesh") mesh_path = next();
+      else if (a == "--ref") ref_path = next();
+      else if (a == "--t") thresholds = cli::parseDoubleList(a, next(), 1e-6, 1e3);
+      else if (a == "--trail-tol") trail_tol = static_cast<float>(cli::parseDouble(a, next(), 0.0, 1e3));
+      else if (a == "--csv") csv_path = next();
+      else return false;
+      return true;
+    });
     if (cloud_path.empty() || (mesh_path.empty() && ref_path.empty())) {
       throw cli::UsageError("--cloud and one of --mesh, --ref are required");
     }
@@ -102,10 +103,8 @@ int main(int argc, char** argv) {
     if (!mesh_path.empty()) cli::requireInputFile("--mesh", mesh_path);
     if (!ref_path.empty()) cli::requireInputFile("--ref", ref_path);
     if (!csv_path.empty()) cli::requireOutputFile("--csv", csv_path);
-  } catch (const cli::UsageError& e) {
-    std::cerr << "map_accuracy: " << e.what() << "\n" << kUsage;
-    return 2;
-  }
+  });
+  if (rc >= 0) return rc;
   try {
     float tmax = trail_tol;
     for (double t : thresholds) tmax = std::max(tmax, static_cast<float>(t));

@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "cli.h"
 #include "fisheye_mapping/core/tsdf/tsdf_map.h"
 #include "fisheye_mapping/core/tsdf/tsdf_mesher.h"
 
@@ -32,7 +33,8 @@ const char* kUsage =
     "           block indices, duplicates): exit 0 if valid, 1 if not (the\n"
     "           reason on stderr).\n"
     "  convert  writes the marching-cubes mesh (.ply) or the surface cloud\n"
-    "           (.pcd) of voxels observed at least N times (default 3).\n"
+    "           (.pcd) of voxels observed at least N times.\n"
+    "  --min-observations N  (convert) N >= 1, default 3.\n"
     "  --max-weight W  the weight cap to check version-1 files against (they do\n"
     "           not store it; default 100, the nodelet's default). Version-2\n"
     "           files carry their own.\n"
@@ -132,30 +134,26 @@ int main(int argc, char** argv) {
   double max_weight_v1 = fm::TsdfConfig().max_weight;
   int min_observations = fm::TsdfConfig().min_observations;
   bool have_min_obs = false;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (a == "-h" || a == "--help") {
-      std::cout << kUsage;
-      return 0;
-    }
-    if (a == "--max-weight" || a == "--min-observations") {
-      if (i + 1 >= argc) return usage(a + " needs a value");
-      const std::string v = argv[++i];
+  const int rc = fm::cli::parseCommandLine("map_tool", kUsage, [&] {
+    fm::cli::forEachOption(argc, argv, 1, [&](const std::string& a, const fm::cli::NextValue& next) {
       if (a == "--max-weight") {
-        if (!parseDouble(v, &max_weight_v1) || !(max_weight_v1 > 0)) {
-          return usage("--max-weight needs a positive number, got '" + v + "'");
-        }
-      } else {
-        if (!parseInt(v, &min_observations) || min_observations < 1) {
-          return usage("--min-observations needs an integer >= 1, got '" + v + "'");
-        }
+        const std::string v = next();
+        if (!parseDouble(v, &max_weight_v1) || !(max_weight_v1 > 0))
+          throw fm::cli::UsageError("--max-weight needs a positive number, got '" + v + "'");
+      } else if (a == "--min-observations") {
+        const std::string v = next();
+        if (!parseInt(v, &min_observations) || min_observations < 1)
+          throw fm::cli::UsageError("--min-observations needs an integer >= 1, got '" + v + "'");
         have_min_obs = true;
+      } else if (a.size() <= 1 || a[0] != '-') {
+        positional.push_back(a);
+      } else {
+        return false;
       }
-      continue;
-    }
-    if (a.size() > 1 && a[0] == '-') return usage("unknown option '" + a + "'");
-    positional.push_back(a);
-  }
+      return true;
+    });
+  });
+  if (rc >= 0) return rc;
   if (positional.empty()) return usage("no command");
   const std::string command = positional[0];
   size_t expected = 0;

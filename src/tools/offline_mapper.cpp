@@ -1,14 +1,13 @@
 // offline_mapper: the mapping pipeline over a rosbag without roscore, as fast
-// as the machine allows: frame sets grouped by exact stamp (core FrameSetSync),
-// then the core FrameSetMapper (depth stage, detector or the drive's
-// ground-truth boxes, masking, TSDF fusion) with poses from the bag's /tf. The
-// same core stage objects, configs and parameter names as the nodelets of
-// vehicle.launch; this file only reads the bag and writes the results.
-//
-//   offline_mapper --bag B --camchain F --mount F --out DIR
-//                  [--config vehicle.yaml] [--detector none|ground_truth|nanodet|darknet|MODEL.yaml]
-//                  [--frames N] [--every K] [--world map] [--depth sweep|gt] [--quiet]
-//                  [--save-depth DIR]
+// as the machine allows: frame sets grouped by the core FrameSetSync (the sync
+// stage's config: exact stamps by default, or approximate), then the core
+// FrameSetMapper (depth stage, detector or the drive's ground-truth boxes,
+// masking, TSDF fusion) with poses from the bag's /tf. The same core stage
+// objects, configs and parameter names as the nodelets of vehicle.launch, and
+// the same default detector (nanodet); this file only reads the bag and writes
+// the results. Images are sensor_msgs/Image or sensor_msgs/CompressedImage
+// (decoded to grey), on the camchain's rostopic of each camera, the `sync`
+// section's image_topics of --config, or --topic CAM=TOPIC.
 //
 // Writes DIR/mesh.ply, DIR/cloud.pcd, DIR/cloud_all.pcd (every voxel with a
 // surface, i.e. without the minimum-observation filter), DIR/timings.md (ms
@@ -17,15 +16,10 @@
 // it wrote. Exit status: 0; 1 when the run failed or a map file could not be
 // written (e.g. --frames 1: nothing observed often enough for a mesh; the
 // earlier file of that name stays); 2 on bad options or input paths.
-// --save-depth DIR writes each fused frame set's masked depth (what the depth
-// mask nodelet publishes on depth_masked) as DIR/<stamp in ns>.tiff.
-// --depth gt fuses the bag's ground-truth depth of the reference camera
-// (/<ref>/depth_gt) instead of the plane sweep: the reference map of the
-// evaluation (moving objects masked the same way). Parameters: the stage defaults of
-// config/plane_sweep_depth.yaml and config/tsdf_fusion.yaml, then the
-// `plane_sweep`, `depth_mask` and `tsdf` sections of --config.
+// Options: see kUsage.
 #include <rosbag/bag.h>
 #include <rosbag/view.h>
+#include <sensor_msgs/CompressedImage.h>
 #include <sensor_msgs/Image.h>
 #include <sensor_msgs/image_encodings.h>
 #include <tf2/buffer_core.h>
@@ -64,15 +58,38 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double msSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
 
-void usage() {
-  std::cerr << "usage: offline_mapper --bag B --camchain F --mount F --out DIR [--config vehicle.yaml]\n"
-               "       [--detector none|ground_truth|nanodet|darknet|MODEL.yaml] [--frames N] [--every K]\n"
-               "       [--world map] [--depth sweep|gt] [--config-dir DIR] [--save-depth DIR] [--quiet]\n"
-               "  --frames N  map at most N frame sets, N in [1, 10000000] (default: all)\n"
-               "  --every K   map every K-th frame set, K in [1, 1000000] (default 1)\n"
-               "  Outputs are written under temporary names and renamed once complete: a failed\n"
-               "  run leaves the files of an earlier run in --out as they were.\n";
-}
+const char* kUsage =
+    "usage: offline_mapper --bag B --camchain F --mount F --out DIR [--config vehicle.yaml]\n"
+    "       [--detector nanodet|darknet|ground_truth|none|MODEL.yaml] [--depth sweep|gt]\n"
+    "       [--topic CAM=TOPIC]... [--sync exact|approximate] [--sync-tolerance SECONDS]\n"
+    "       [--frames N] [--every K] [--world map] [--config-dir DIR] [--save-depth DIR] [--quiet]\n"
+    "  --bag B            the drive: camera images (raw or compressed), /tf, and for the\n"
+    "                     oracles /<ref>/detections_gt and /<ref>/depth_gt\n"
+    "  --camchain F, --mount F  the rig (Kalibr camchain and mount)\n"
+    "  --out DIR          mesh.ply, cloud.pcd, cloud_all.pcd, timings.md, timings.csv\n"
+    "  --config YAML      sections sync, plane_sweep, detector, depth_mask, tsdf over the\n"
+    "                     stage defaults (as vehicle.launch's config:=)\n"
+    "  --detector D       nanodet (default, as vehicle.launch), darknet (yolov3-tiny), a\n"
+    "                     model YAML, ground_truth (the oracle: the drive's true boxes)\n"
+    "                     or none (nothing masked)\n"
+    "  --depth SRC        sweep (default): plane-sweep depth; gt: the bag's ground-truth\n"
+    "                     depth of the reference camera (the evaluation's reference map;\n"
+    "                     with --detector ground_truth or none)\n"
+    "  --topic CAM=TOPIC  read camera CAM's images from TOPIC (repeatable; default: the\n"
+    "                     config's sync/image_topics, else the camchain's rostopic)\n"
+    "  --sync POLICY      exact: images of one frame set have equal stamps; approximate:\n"
+    "                     within --sync-tolerance (default: the config's sync/policy, exact)\n"
+    "  --sync-tolerance S seconds, approximate policy, in [0, 1] (default: the config's\n"
+    "                     sync/max_interval, 0.005)\n"
+    "  --frames N         map at most N frame sets, N in [1, 10000000] (default: all)\n"
+    "  --every K          map every K-th frame set, K in [1, 1000000] (default 1)\n"
+    "  --world FRAME      the fixed frame of the poses (default map)\n"
+    "  --config-dir DIR   the stage default files (default: the package's config/)\n"
+    "  --save-depth DIR   write each mapped frame set's masked depth as DIR/<stamp ns>.tiff\n"
+    "  --quiet            no progress bar\n"
+    "  Outputs are written under temporary names and renamed once complete: a failed\n"
+    "  run leaves the files of an earlier run in --out as they were. Exit status: 0;\n"
+    "  1 when the run failed or a map file was not written; 2 on bad options.\n";
 
 YAML::Node loadYaml(const std::string& path) {
   try {
@@ -96,21 +113,89 @@ double median(std::vector<double> v) {
   return v[v.size() / 2];
 }
 
+// One camera image of the bag, raw or compressed; decoded only when its frame
+// set is mapped.
+struct BagImage {
+  sensor_msgs::Image::ConstPtr raw;
+  sensor_msgs::CompressedImage::ConstPtr compressed;
+
+  static std::optional<BagImage> of(const rosbag::MessageInstance& m) {
+    if (auto img = m.instantiate<sensor_msgs::Image>()) return BagImage{img, nullptr};
+    if (auto img = m.instantiate<sensor_msgs::CompressedImage>()) return BagImage{nullptr, img};
+    return std::nullopt;
+  }
+  const std_msgs::Header& header() const { return raw ? raw->header : compressed->header; }
+  // Raw images decoded as the depth nodelet decodes them (ros/conversions.h),
+  // compressed ones to 8-bit grey.
+  cv::Mat sweepImage(const std::string& source) const {
+    return raw ? fm::toCvImageShare(raw, fm::ImageTarget::kSweep, source) : fm::toGrey(*compressed, source);
+  }
+};
+
+// --topic CAM=TOPIC, checked: both parts present.
+std::pair<std::string, std::string> parseTopicOption(const std::string& text) {
+  const size_t eq = text.find('=');
+  if (eq == std::string::npos || eq == 0 || eq + 1 == text.size())
+    throw cli::UsageError("--topic needs CAM=TOPIC (e.g. cam0=/cam0/image_raw/compressed), got '" + text + "'");
+  return {text.substr(0, eq), text.substr(eq + 1)};
+}
+
+// "exact" or "approximate (0.005 s)", for timings.md.
+std::string syncText(fm::SyncPolicy policy, double max_interval) {
+  return policy == fm::SyncPolicy::Exact ? "exact" : "approximate (" + cli::numberText(max_interval) + " s)";
+}
+
+// --sync exact|approximate.
+fm::SyncPolicy parseSyncOption(const std::string& text) {
+  try {
+    return fm::parseSyncPolicy(text);
+  } catch (const std::invalid_argument&) {
+    throw cli::UsageError("--sync must be exact or approximate, got '" + text + "'");
+  }
+}
+
+// The image topic of each camera, in camera order: --topic, else the sync
+// config's image_topics, else the camchain's rostopic, else /<cam>/image_raw.
+// Throws UsageError for a --topic camera the rig lacks or two cameras on one
+// topic.
+std::vector<std::string> imageTopics(const fm::Rig& rig, const std::vector<std::string>& config_topics,
+                                     const std::map<std::string, std::string>& overrides) {
+  if (!config_topics.empty() && config_topics.size() != rig.cameras.size())
+    throw std::runtime_error("sync/image_topics of --config has " + std::to_string(config_topics.size()) +
+                             " topics for " + std::to_string(rig.cameras.size()) + " cameras");
+  std::vector<std::string> topics;
+  for (size_t c = 0; c < rig.cameras.size(); ++c) {
+    const fm::RigCamera& cam = rig.cameras[c];
+    topics.push_back(!config_topics.empty() ? config_topics[c]
+                     : cam.rostopic.empty() ? "/" + cam.name + "/image_raw"
+                                            : cam.rostopic);
+  }
+  for (const auto& [name, topic] : overrides) {
+    const int c = rig.indexOf(name);
+    if (c < 0) throw cli::UsageError("--topic: no camera '" + name + "' in the rig");
+    topics[c] = topic;
+  }
+  for (size_t c = 0; c < topics.size(); ++c)
+    for (size_t d = 0; d < c; ++d)
+      if (topics[c] == topics[d])
+        throw cli::UsageError("cameras " + rig.cameras[d].name + " and " + rig.cameras[c].name + " both read " +
+                              topics[c] + " (give each its own with --topic)");
+  return topics;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string bag_path, camchain, mount, out, config_path, detector = "ground_truth", world = "map", depth_src = "sweep";
+  std::string bag_path, camchain, mount, out, config_path, detector = "nanodet", world = "map", depth_src = "sweep";
   std::string save_depth;
   std::string config_dir = FM_CONFIG_DIR;
+  std::map<std::string, std::string> topic_overrides;
+  std::optional<fm::SyncPolicy> sync_policy;
+  std::optional<double> sync_tolerance;
   int max_frames = 0, every = 1;
   bool quiet = false;
-  try {
-    for (int i = 1; i < argc; ++i) {
-      const std::string a = argv[i];
-      auto next = [&]() -> std::string {
-        if (i + 1 >= argc) throw cli::UsageError(a + " needs a value");
-        return argv[++i];
-      };
+  const int rc = cli::parseCommandLine("offline_mapper", kUsage, [&] {
+    cli::forEachOption(argc, argv, 1, [&](const std::string& a, const cli::NextValue& next) {
       if (a == "--bag") bag_path = next();
       else if (a == "--camchain") camchain = next();
       else if (a == "--mount") mount = next();
@@ -123,14 +208,13 @@ int main(int argc, char** argv) {
       else if (a == "--world") world = next();
       else if (a == "--depth") depth_src = next();
       else if (a == "--save-depth") save_depth = next();
+      else if (a == "--topic") topic_overrides.insert(parseTopicOption(next()));
+      else if (a == "--sync") sync_policy = parseSyncOption(next());
+      else if (a == "--sync-tolerance") sync_tolerance = cli::parseDouble(a, next(), 0.0, 1.0);
       else if (a == "--quiet") quiet = true;
-      else if (a == "-h" || a == "--help") {
-        usage();
-        return 0;
-      } else {
-        throw cli::UsageError("unknown argument '" + a + "'");
-      }
-    }
+      else return false;
+      return true;
+    });
     if (bag_path.empty() || camchain.empty() || mount.empty() || out.empty())
       throw cli::UsageError("--bag, --camchain, --mount and --out are required");
     if (depth_src != "sweep" && depth_src != "gt") throw cli::UsageError("--depth must be sweep or gt, got '" + depth_src + "'");
@@ -145,11 +229,8 @@ int main(int argc, char** argv) {
       cli::requireInputFile("--detector", detector);
     cli::prepareOutputDir("--out", out);
     if (!save_depth.empty()) cli::prepareOutputDir("--save-depth", save_depth);
-  } catch (const cli::UsageError& e) {
-    std::cerr << "offline_mapper: " << e.what() << "\n";
-    usage();
-    return 2;
-  }
+  });
+  if (rc >= 0) return rc;
   // Temporary outputs of this run; removed when it fails.
   std::vector<std::string> partials;
   try {
@@ -160,6 +241,12 @@ int main(int argc, char** argv) {
     const fm::YamlParams mask_p(stageParams("", config, "depth_mask"), "depth_mask");
     const fm::YamlParams det_p(stageParams("", config, "detector"), "detector");
     const fm::FrameSetMapperConfig mapper_cfg = fm::FrameSetMapperConfig::fromParams(sweep_p, det_p, mask_p, tsdf_p);
+    // The sync stage's config (the `sync` section of --config), then the options.
+    fm::FrameSyncConfig sync_cfg = fm::FrameSyncConfig::fromParams(fm::YamlParams(stageParams("", config, "sync"), "sync"));
+    if (sync_policy) sync_cfg.policy = *sync_policy;
+    if (sync_tolerance) sync_cfg.max_interval = *sync_tolerance;
+    sync_cfg.validate();
+    const std::vector<std::string> camera_topics = imageTopics(rig, sync_cfg.image_topics, topic_overrides);
     std::unique_ptr<fm::Detector> det;
     if (detector != "none" && detector != "ground_truth") {
       std::string yaml = detector;
@@ -205,13 +292,9 @@ int main(int argc, char** argv) {
       throw std::runtime_error(bag_path + " has no " + gt_topic + " (ground-truth boxes); use --detector none or a model");
 
     // Pass 2: frame sets.
-    std::vector<std::string> topics;
+    std::vector<std::string> topics = camera_topics;
     std::map<std::string, int> cam_of;
-    for (size_t c = 0; c < rig.cameras.size(); ++c) {
-      const std::string t = rig.cameras[c].rostopic.empty() ? "/" + rig.cameras[c].name + "/image_raw" : rig.cameras[c].rostopic;
-      topics.push_back(t);
-      cam_of[t] = int(c);
-    }
+    for (size_t c = 0; c < topics.size(); ++c) cam_of[topics[c]] = int(c);
     if (depth_src == "gt") {  // ground-truth depth stands in for the whole frame set
       topics = {gt_depth_topic};
       cam_of = {{gt_depth_topic, 0}};
@@ -220,8 +303,11 @@ int main(int argc, char** argv) {
     if (images.size() == 0) throw std::runtime_error(bag_path + " has none of the topics " + topics[0] + " ...");
     size_t total_sets = images.size() / (depth_src == "gt" ? 1 : rig.cameras.size()) / every;
     if (max_frames > 0) total_sets = std::min<size_t>(total_sets, max_frames);
-    fm::FrameSetSync<sensor_msgs::Image::ConstPtr> sync(depth_src == "gt" ? 1 : int(rig.cameras.size()),
-                                                        fm::SyncPolicy::Exact, 0.0, 10);
+    // Ground-truth depth is one stream: nothing to group.
+    const bool one_stream = depth_src == "gt";
+    fm::FrameSetSync<BagImage> sync(one_stream ? 1 : int(rig.cameras.size()),
+                                    one_stream ? fm::SyncPolicy::Exact : sync_cfg.policy, sync_cfg.max_interval,
+                                    std::size_t(sync_cfg.queue_size), sync_cfg.time_reset_threshold);
     const int ref_slot = depth_src == "gt" ? 0 : ref;
     // timings.csv is written under a temporary name and renamed at the end.
     const std::string csv_tmp = cli::partialName(out + "/timings.csv");
@@ -233,14 +319,14 @@ int main(int argc, char** argv) {
     size_t sets_seen = 0, processed = 0, skipped_pose = 0, no_boxes = 0;
     const auto run_start = Clock::now();
     for (const rosbag::MessageInstance& m : images) {
-      auto img = m.instantiate<sensor_msgs::Image>();
+      const std::optional<BagImage> img = BagImage::of(m);
       if (!img) continue;
-      auto done = sync.add(cam_of[m.getTopic()], std::int64_t(img->header.stamp.toNSec()), img);
+      auto done = sync.add(cam_of[m.getTopic()], std::int64_t(img->header().stamp.toNSec()), *img);
       for (auto& set : done) {
         if (sets_seen++ % every != 0) continue;
         if (max_frames > 0 && int(processed) >= max_frames) break;
         const auto t0 = Clock::now();
-        const ros::Time stamp = set[ref_slot]->header.stamp;
+        const ros::Time stamp = set[ref_slot].header().stamp;
         Eigen::Isometry3d T_W_B;
         try {
           T_W_B = tf2::transformToEigen(tf.lookupTransform(world, rig.base_frame, stamp));
@@ -261,12 +347,11 @@ int main(int argc, char** argv) {
         }
         fm::FrameSetResult r;
         if (depth_src == "gt") {
-          r = mapper.processDepth(fm::toDepth(*set[0], gt_depth_topic), T_W_B, boxes);
+          if (!set[0].raw) throw std::runtime_error(gt_depth_topic + " must hold sensor_msgs/Image (32FC1)");
+          r = mapper.processDepth(fm::toDepth(*set[0].raw, gt_depth_topic), T_W_B, boxes);
         } else {
           std::vector<cv::Mat> images;
-          // Decoded as the depth nodelet decodes them (ros/conversions.h).
-          for (size_t c = 0; c < set.size(); ++c)
-            images.push_back(fm::toCvImageShare(set[c], fm::ImageTarget::kSweep, rig.cameras[c].name));
+          for (size_t c = 0; c < set.size(); ++c) images.push_back(set[c].sweepImage(rig.cameras[c].name));
           r = mapper.process(images, T_W_B, boxes);
         }
         if (!save_depth.empty())
@@ -333,8 +418,9 @@ int main(int argc, char** argv) {
     std::snprintf(buf, sizeof(buf),
                   "\n%zu frame sets mapped in %.1f s (%.2f per second, end to end, reading the bag included); "
                   "%lu incomplete sets dropped, %zu without a pose, %zu without ground-truth boxes; "
-                  "sweep backend %s; map: %zu triangles, %zu cloud points.\n",
+                  "sync %s; sweep backend %s; map: %zu triangles, %zu cloud points.\n",
                   processed, wall, processed / wall, (unsigned long)s.dropped_incomplete, skipped_pose, no_boxes,
+                  syncText(one_stream ? fm::SyncPolicy::Exact : sync_cfg.policy, sync_cfg.max_interval).c_str(),
                   mapper.depthStage().backendName().c_str(), mesher.numTriangles(), mesher.surfaceCloud().size());
     md << buf;
     csv.close();
@@ -354,6 +440,10 @@ int main(int argc, char** argv) {
       std::cout << "\n";
       return 1;
     }
+  } catch (const cli::UsageError& e) {  // an option that does not fit the rig (--topic)
+    for (const auto& p : partials) std::remove(p.c_str());
+    std::cerr << "offline_mapper: " << e.what() << "\n";
+    return 2;
   } catch (const std::exception& e) {
     for (const auto& p : partials) std::remove(p.c_str());
     std::cerr << "\noffline_mapper: " << e.what() << "\n";

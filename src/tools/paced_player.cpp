@@ -43,6 +43,7 @@
 #include <condition_variable>
 #include <cstdio>
 #include <fstream>
+#include <iostream>
 #include <map>
 #include <mutex>
 #include <set>
@@ -65,6 +66,23 @@ double imageStamp(const rosbag::MessageInstance& m) {
   return NAN;
 }
 
+const char* kUsage =
+    "usage: rosrun fisheye_mapping paced_player _bag:=drive.bag _camchain:=camchain.yaml _mount:=mount.yaml\n"
+    "  Plays a rosbag so that no frame set is lost: before each new frame set it waits\n"
+    "  for the pipeline's fisheye_mapping/FrameDone of the previous one. Parameters (private):\n"
+    "  ~bag               the rosbag (required)\n"
+    "  ~camchain, ~mount  the rig whose cameras' rostopic fields name the image topics\n"
+    "  ~image_topics      or the image topics as a list\n"
+    "  ~reference_topic   the reference camera's image topic (default: the first)\n"
+    "  ~done_topic        default /fusion_done\n"
+    "  ~timeout           seconds to wait for one frame set (default 120)\n"
+    "  ~wait_subscribers  seconds to wait for the pipeline to subscribe (default 120)\n"
+    "  ~start             seconds into the bag to begin (default 0)\n"
+    "  ~require_tf        the bag must hold /tf (default true)\n"
+    "  ~summary_file      YAML with the counts, written at the end (optional)\n"
+    "  ~hold              after the drive, keep publishing the last poses (default true)\n"
+    "Exit status: 0 played to the end, 1 bad input, 2 bad parameters.\n";
+
 struct Done {
   std::mutex mutex;
   std::condition_variable cv;
@@ -75,7 +93,24 @@ struct Done {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // Options before ros::init, so that --help needs no ROS master; ros::init
+  // then takes away the remappings (_param:=value, __name:=...), and any
+  // option left is unknown.
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "-h" || a == "--help") {
+      std::cout << kUsage;
+      return 0;
+    }
+  }
   ros::init(argc, argv, "paced_player");
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a.size() > 1 && a[0] == '-') {
+      std::cerr << "paced_player: unknown option '" << a << "' (parameters are given as _name:=value)\n" << kUsage;
+      return 2;
+    }
+  }
   ros::NodeHandle nh, pnh("~");
   std::string bag_path, camchain, mount, reference_topic, done_topic = "/fusion_done", summary_file;
   std::vector<std::string> image_topics;
@@ -135,13 +170,6 @@ int main(int argc, char** argv) {
     }
   }
   if (reference_topic.empty()) reference_topic = image_topics.front();
-  std::unique_ptr<fm::FramePacer> pacer;
-  try {
-    pacer = std::make_unique<fm::FramePacer>(reference_topic, image_topics);
-  } catch (const std::exception& e) {
-    ROS_FATAL("paced_player: %s", e.what());
-    return 2;
-  }
 
   rosbag::Bag bag;
   try {
@@ -155,6 +183,20 @@ int main(int argc, char** argv) {
   {
     rosbag::View all(bag);
     for (const auto* c : all.getConnections()) bag_topics.insert(c->topic);
+  }
+  // A camchain names the base topic (image_transport): a bag of compressed
+  // images carries <topic>/compressed instead.
+  for (auto& t : image_topics) {
+    if (bag_topics.count(t) || !bag_topics.count(t + "/compressed")) continue;
+    if (reference_topic == t) reference_topic += "/compressed";
+    t += "/compressed";
+  }
+  std::unique_ptr<fm::FramePacer> pacer;
+  try {
+    pacer = std::make_unique<fm::FramePacer>(reference_topic, image_topics);
+  } catch (const std::exception& e) {
+    ROS_FATAL("paced_player: %s", e.what());
+    return 2;
   }
   for (const auto& t : image_topics) {
     if (!bag_topics.count(t)) {

@@ -26,6 +26,7 @@
 #include <sensor_msgs/Image.h>
 #include <yaml-cpp/yaml.h>
 
+#include "cli.h"
 #include "fisheye_mapping/core/depth/depth_image.h"
 #include "fisheye_mapping/core/common/params.h"
 #include "fisheye_mapping/core/depth/depth_stage.h"
@@ -37,19 +38,27 @@ namespace fm = fisheye_mapping;
 
 namespace {
 
-[[noreturn]] void usage(const std::string& msg) {
-  std::cerr << "plane_sweep_depth: " << msg << "\n"
-            << "usage: plane_sweep_depth --camchain F --mount F [--reference cam0] [--config YAML] [--set key=value]...\n"
-            << "         (--image CAM=FILE ... [--mask CAM=FILE ...] --out PREFIX\n"
-            << "          | --bag FILE --out DIR [--topic CAM=TOPIC ...] [--max-sets N])\n"
-            << "  Depth is 32-bit float TIFF: metres of range along each pixel's ray, NaN invalid.\n"
-            << "  --config reads plane-sweep parameters (config/plane_sweep_depth.yaml); --set overrides one.\n";
-  std::exit(2);
-}
+const char* kUsage =
+    "usage: plane_sweep_depth --camchain F --mount F [--reference cam0] [--config YAML] [--set key=value]...\n"
+    "         (--image CAM=FILE ... [--mask CAM=FILE ...] --out PREFIX\n"
+    "          | --bag FILE --out DIR [--topic CAM=TOPIC ...] [--max-sets N])\n"
+    "  --camchain F, --mount F  the rig (Kalibr camchain and mount)\n"
+    "  --reference CAM      the camera whose depth is computed (default cam0)\n"
+    "  --config YAML        plane-sweep parameters (as config/plane_sweep_depth.yaml)\n"
+    "  --set KEY=VALUE      overrides one parameter (repeatable)\n"
+    "  --image CAM=FILE     one camera's image (images mode; one per camera)\n"
+    "  --mask CAM=FILE      one camera's self-mask (images mode)\n"
+    "  --out PREFIX|DIR     images mode: PREFIX_depth.tiff, PREFIX_depth.png, PREFIX_cost.tiff;\n"
+    "                       bag mode: DIR/depth_<stamp>.tiff per complete frame set\n"
+    "  --bag FILE           bag mode: frame sets grouped by exact stamp\n"
+    "  --topic CAM=TOPIC    bag mode: the camera's image topic (default: the camchain's rostopic)\n"
+    "  --max-sets N         bag mode: at most N frame sets (default: all)\n"
+    "  Depth is 32-bit float TIFF: metres of range along each pixel's ray, NaN invalid.\n";
+
 
 std::pair<std::string, std::string> split(const std::string& kv, const std::string& what) {
   const size_t eq = kv.find('=');
-  if (eq == std::string::npos || eq == 0) usage(what + " expects NAME=VALUE, got '" + kv + "'");
+  if (eq == std::string::npos || eq == 0) throw fm::cli::UsageError(what + " expects NAME=VALUE, got '" + kv + "'");
   return {kv.substr(0, eq), kv.substr(eq + 1)};
 }
 
@@ -95,21 +104,25 @@ void writeOutputs(const std::string& prefix, const fm::DepthResult& r, const fm:
 int main(int argc, char** argv) {
   std::map<std::string, std::string> one;
   std::vector<std::pair<std::string, std::string>> images, masks, topics, sets;
-  for (int i = 1; i < argc; ++i) {
-    const std::string k = argv[i];
-    if (k == "-h" || k == "--help") usage("help");
-    if (k.rfind("--", 0) != 0 || i + 1 >= argc) usage("bad argument '" + k + "'");
-    const std::string v = argv[++i];
-    if (k == "--image") images.push_back(split(v, k));
-    else if (k == "--mask") masks.push_back(split(v, k));
-    else if (k == "--topic") topics.push_back(split(v, k));
-    else if (k == "--set") sets.push_back(split(v, k));
-    else one[k.substr(2)] = v;
-  }
-  for (const char* req : {"camchain", "mount", "out"}) {
-    if (!one.count(req)) usage(std::string("--") + req + " is required");
-  }
-  if (images.empty() == !one.count("bag")) usage("give either --image CAM=FILE ... or --bag FILE");
+  const int rc = fm::cli::parseCommandLine("plane_sweep_depth", kUsage, [&] {
+    fm::cli::forEachOption(argc, argv, 1, [&](const std::string& k, const fm::cli::NextValue& next) {
+      static const std::set<std::string> kSingle = {"--camchain", "--mount", "--out", "--bag", "--reference", "--config"};
+      if (k == "--image") images.push_back(split(next(), k));
+      else if (k == "--mask") masks.push_back(split(next(), k));
+      else if (k == "--topic") topics.push_back(split(next(), k));
+      else if (k == "--set") sets.push_back(split(next(), k));
+      else if (k == "--max-sets") one["max-sets"] = std::to_string(fm::cli::parseInt(k, next(), 1, 100000000));
+      else if (kSingle.count(k)) one[k.substr(2)] = next();
+      else return false;
+      return true;
+    });
+    for (const char* req : {"camchain", "mount", "out"}) {
+      if (!one.count(req)) throw fm::cli::UsageError(std::string("--") + req + " is required");
+    }
+    if (images.empty() == !one.count("bag"))
+      throw fm::cli::UsageError("give either --image CAM=FILE ... or --bag FILE");
+  });
+  if (rc >= 0) return rc;
   try {
     const fm::Rig rig = fm::loadKalibrRig(one["camchain"], one["mount"]);
     const std::string ref_name = one.count("reference") ? one["reference"] : "cam0";

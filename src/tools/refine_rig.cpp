@@ -25,6 +25,7 @@
 
 #include <opencv2/imgcodecs.hpp>
 
+#include "cli.h"
 #include "fisheye_mapping/core/sync/frame_sync.h"
 #include "fisheye_mapping/core/camera/rig.h"
 #include "fisheye_mapping/ros/conversions.h"
@@ -34,15 +35,22 @@ namespace fm = fisheye_mapping;
 
 namespace {
 
-void usage() {
-  std::cerr << "usage: refine_rig --bag B --camchain F --mount F --out CORRECTED_CAMCHAIN.yaml [--mount-out M.yaml]\n"
-               "       [--frames N (default 10)] [--every K (default 1)] [--self-masks cam0=PNG,cam1=PNG,...]\n"
-               "       [--refine-translation] [--min-inliers N (default 50)]\n";
-}
+const char* kUsage =
+    "usage: refine_rig --bag B --camchain F --mount F --out CORRECTED_CAMCHAIN.yaml [--mount-out M.yaml]\n"
+    "       [--frames N] [--every K] [--self-masks cam0=PNG,cam1=PNG,...]\n"
+    "       [--refine-translation] [--min-inliers N]\n"
+    "  --bag B                 the logged drive (images of every camera and their stamps)\n"
+    "  --camchain F, --mount F the rig to correct (Kalibr camchain and mount)\n"
+    "  --out FILE              the corrected camchain\n"
+    "  --mount-out FILE        also write the mount that goes with the corrected camchain\n"
+    "  --frames N              frame sets to use, 1 to 1000000 (default 10)\n"
+    "  --every K               use every K-th frame set, 1 to 1000000 (default 1)\n"
+    "  --self-masks LIST       NAME=PNG per camera: where the car body hides the scene\n"
+    "  --refine-translation    refine the translations too (default: rotations only)\n"
+    "  --min-inliers N         matches a camera needs, at least 5 (default 50)\n";
 
 [[noreturn]] void usageError(const std::string& why) {
-  std::cerr << "refine_rig: " << why << "\n";
-  usage();
+  std::cerr << "refine_rig: " << why << "\n" << kUsage;
   std::exit(2);
 }
 
@@ -54,7 +62,8 @@ int positiveInt(const std::string& flag, const std::string& s) {
   } catch (const std::exception&) {
     used = 0;
   }
-  if (used != s.size() || s.empty() || v < 1 || v > 1000000) usageError(flag + " expects a positive integer, got '" + s + "'");
+  if (used != s.size() || s.empty() || v < 1 || v > 1000000)
+    throw fm::cli::UsageError(flag + " expects a positive integer, got '" + s + "'");
   return int(v);
 }
 
@@ -69,30 +78,26 @@ int main(int argc, char** argv) {
   std::string bag_path, camchain, mount, out, mount_out, masks_arg;
   int max_frames = 10, every = 1;
   fm::RigRefinementConfig cfg;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) usageError(a + " needs a value");
-      return argv[++i];
-    };
-    if (a == "--bag") bag_path = next();
-    else if (a == "--camchain") camchain = next();
-    else if (a == "--mount") mount = next();
-    else if (a == "--out") out = next();
-    else if (a == "--mount-out") mount_out = next();
-    else if (a == "--frames") max_frames = positiveInt(a, next());
-    else if (a == "--every") every = positiveInt(a, next());
-    else if (a == "--self-masks") masks_arg = next();
-    else if (a == "--refine-translation") cfg.refine_translation = true;
-    else if (a == "--min-inliers") cfg.min_inliers = positiveInt(a, next());
-    else if (a == "-h" || a == "--help") {
-      usage();
-      return 0;
-    } else usageError("unknown argument '" + a + "'");
-  }
-  if (bag_path.empty() || camchain.empty() || mount.empty() || out.empty())
-    usageError("--bag, --camchain, --mount and --out are required");
-  if (cfg.min_inliers < 5) usageError("--min-inliers must be >= 5");
+  const int rc = fm::cli::parseCommandLine("refine_rig", kUsage, [&] {
+    fm::cli::forEachOption(argc, argv, 1, [&](const std::string& a, const fm::cli::NextValue& next) {
+      if (a == "--bag") bag_path = next();
+      else if (a == "--camchain") camchain = next();
+      else if (a == "--mount") mount = next();
+      else if (a == "--out") out = next();
+      else if (a == "--mount-out") mount_out = next();
+      else if (a == "--frames") max_frames = positiveInt(a, next());
+      else if (a == "--every") every = positiveInt(a, next());
+      else if (a == "--self-masks") masks_arg = next();
+      else if (a == "--refine-translation") cfg.refine_translation = true;
+      else if (a == "--min-inliers") cfg.min_inliers = positiveInt(a, next());
+      else return false;
+      return true;
+    });
+    if (bag_path.empty() || camchain.empty() || mount.empty() || out.empty())
+      throw fm::cli::UsageError("--bag, --camchain, --mount and --out are required");
+    if (cfg.min_inliers < 5) throw fm::cli::UsageError("--min-inliers must be >= 5");
+  });
+  if (rc >= 0) return rc;
 
   try {
     const fm::Rig rig = fm::loadKalibrRig(camchain, mount);

@@ -21,9 +21,11 @@ namespace fm = fisheye_mapping;
 
 namespace {
 
-[[maybe_unused]] const char* kUsage =
+const char* kUsage =
     "usage: rig_info (--camchain FILE --mount FILE | --psl FILE --size WxH)\n"
     "                [--range METRES] [--project CAM | --unproject CAM]\n"
+    "  --camchain FILE, --mount FILE  the rig (Kalibr camchain and mount)\n"
+    "  --psl FILE, --size WxH         or a PlaneSweepLib calibration and its image size\n"
     "  Without --project/--unproject: prints each camera's model, resolution,\n"
     "  field of view, position relative to cam0 and the base frame, and the\n"
     "  overlap of each pair's fields of view at --range metres (default 20).\n"
@@ -196,13 +198,8 @@ int main(int argc, char** argv) {
   namespace cli = fm::cli;
   std::string camchain, mount, psl, size, project_cam, unproject_cam;
   double range = 20.0;
-  try {
-    for (int i = 1; i < argc; ++i) {
-      const std::string arg = argv[i];
-      auto value = [&]() -> std::string {
-        if (i + 1 >= argc) throw cli::UsageError(arg + " needs a value");
-        return argv[++i];
-      };
+  const int rc = cli::parseCommandLine("rig_info", kUsage, [&] {
+    cli::forEachOption(argc, argv, 1, [&](const std::string& arg, const cli::NextValue& value) {
       if (arg == "--camchain") camchain = value();
       else if (arg == "--mount") mount = value();
       else if (arg == "--psl") psl = value();
@@ -210,13 +207,9 @@ int main(int argc, char** argv) {
       else if (arg == "--project") project_cam = value();
       else if (arg == "--unproject") unproject_cam = value();
       else if (arg == "--range") range = cli::parsePositive(arg, value(), 1e6);
-      else if (arg == "-h" || arg == "--help") {
-        std::cout << kUsage;
-        return 0;
-      } else {
-        throw cli::UsageError("unknown argument '" + arg + "'");
-      }
-    }
+      else return false;
+      return true;
+    });
     if (!project_cam.empty() && !unproject_cam.empty()) {
       throw cli::UsageError("give --project or --unproject, not both");
     }
@@ -226,10 +219,8 @@ int main(int argc, char** argv) {
     if (psl.empty() && (camchain.empty() || mount.empty())) {
       throw cli::UsageError("give --camchain and --mount, or --psl and --size");
     }
-  } catch (const cli::UsageError& e) {
-    std::cerr << "rig_info: " << e.what() << "\n" << kUsage;
-    return 2;
-  }
+  });
+  if (rc >= 0) return rc;
   try {
     fm::Rig rig;
     if (!psl.empty()) {

@@ -100,30 +100,25 @@ int main(int argc, char** argv) {
   int n_frames = 30, threads = 0;
   double drive = 0;
   const char* usage =
-      "usage: tsdf_benchmark --out DIR [--frames N (1 to 10000)] [--threads T (0 to 1024)]\n"
-      "       tsdf_benchmark --drive METRES (up to 100000) --out DIR\n";
-  try {
-    for (int i = 1; i < argc; ++i) {
-      const std::string a = argv[i];
-      if (a == "-h" || a == "--help") {
-        std::cout << usage;
-        return 0;
-      }
-      if (a != "--out" && a != "--frames" && a != "--threads" && a != "--drive")
-        throw fm::cli::UsageError("unknown argument '" + a + "'");
-      if (i + 1 >= argc) throw fm::cli::UsageError(a + " needs a value");
-      const std::string v = argv[++i];
-      if (a == "--out") out = v;
-      else if (a == "--frames") n_frames = static_cast<int>(fm::cli::parseInt(a, v, 1, 10000));
-      else if (a == "--threads") threads = static_cast<int>(fm::cli::parseInt(a, v, 0, 1024));
-      else if (a == "--drive") drive = fm::cli::parseDouble(a, v, 0, 100000);
-    }
+      "usage: tsdf_benchmark --out DIR [--frames N] [--threads T]\n"
+      "       tsdf_benchmark --drive METRES --out DIR\n"
+      "  --out DIR       folder for the rendered frames (frame_NNN.bin, poses.txt); created\n"
+      "  --frames N      frames of the street drive, 1 to 10000 (default 30)\n"
+      "  --threads T     integration threads, 0 to 1024 (default 0: the OpenMP default)\n"
+      "  --drive METRES  instead: resident memory after a drive of that length, up to 100000\n";
+  const int rc = fm::cli::parseCommandLine("tsdf_benchmark", usage, [&] {
+    fm::cli::forEachOption(argc, argv, 1, [&](const std::string& a, const fm::cli::NextValue& next) {
+      if (a == "--out") out = next();
+      else if (a == "--frames") n_frames = static_cast<int>(fm::cli::parseInt(a, next(), 1, 10000));
+      else if (a == "--threads") threads = static_cast<int>(fm::cli::parseInt(a, next(), 0, 1024));
+      else if (a == "--drive") drive = fm::cli::parseDouble(a, next(), 0, 100000);
+      else return false;
+      return true;
+    });
     if (out.empty()) throw fm::cli::UsageError("--out is required");
     fm::cli::prepareOutputDir("--out", out);
-  } catch (const fm::cli::UsageError& e) {
-    std::cerr << "tsdf_benchmark: " << e.what() << "\n" << usage;
-    return 2;
-  }
+  });
+  if (rc >= 0) return rc;
   std::filesystem::create_directories(out);
   const double step = 1.0;  // metres between frames
   const Scene scene = streetScene(n_frames * step);

@@ -1,15 +1,16 @@
 // libFuzzer target: the TSDF map file loader (TsdfMap::load, public API only).
 // Each input is written to a file and loaded twice: as it is (header and
-// record CRCs must catch corruption), and, for a version-2 file, with its CRCs
-// recomputed from the layout documented in src/core/tsdf/tsdf_io.cpp, so that the
-// checks behind the CRCs (block count against the file size, finite voxels,
-// |tsdf| <= 1, weights, block indices, duplicates) are reached too.
+// record CRCs must catch corruption), and, for a version-2 or version-3 file,
+// with its CRCs recomputed from the layout documented in
+// src/core/tsdf/tsdf_io.cpp, so that the checks behind the CRCs (block count
+// against the file size, version 3's zlib streams and voxel masks, finite
+// voxels, |tsdf| <= 1, weights, block indices, duplicates) are reached too.
 // Allowed outcomes: std::runtime_error naming the file (map unchanged), or a
 // map whose every voxel obeys the documented limits.
 //
 // With FM_FUZZ_SEED_DIR set, the first run writes fresh seeds there (a map
-// saved by the current code, version 2, and the same as version 1), so the
-// corpus follows the file format.
+// saved by the current code: version 3, the same as version 2 and as
+// version 1), so the corpus follows the file format.
 #include <unistd.h>
 
 #include <cmath>
@@ -41,6 +42,7 @@ const std::map<std::string, std::string>& embeddedClSources() {
 namespace {
 
 constexpr size_t kHeaderV2 = 44, kHeaderV1 = 36, kRecordV1 = 12 + 512 * 8, kRecordV2 = kRecordV1 + 4;
+constexpr size_t kHeadV3 = 16;  // index, compressed size
 
 const std::string& path() {
   static const std::string p = "/tmp/fm_fuzz_tsdf_" + std::to_string(getpid()) + ".map";
@@ -79,17 +81,23 @@ void loadAndCheck(const std::vector<uint8_t>& bytes) {
   }
 }
 
-// Recomputes the header and record CRCs of a version-2 file.
+// Recomputes the header and record CRCs of a version-2 or version-3 file
+// (version 3: record by record while each record's size fits in the file).
 std::vector<uint8_t> withFixedCrcs(std::vector<uint8_t> b) {
   if (b.size() < kHeaderV2 || std::memcmp(b.data(), "FMTSDF01", 8) != 0) return {};
   uint32_t version = 0;
   std::memcpy(&version, b.data() + 8, 4);
-  if (version != 2) return {};
+  if (version != 2 && version != 3) return {};
   uint32_t crc = fm::crc32(b.data(), 40);
   std::memcpy(b.data() + 40, &crc, 4);
-  for (size_t at = kHeaderV2; at + kRecordV2 <= b.size(); at += kRecordV2) {
-    crc = fm::crc32(b.data() + at, kRecordV1);
-    std::memcpy(b.data() + at + kRecordV1, &crc, 4);
+  for (size_t at = kHeaderV2; at + kHeadV3 <= b.size();) {
+    uint32_t packed = 0;
+    std::memcpy(&packed, b.data() + at + 12, 4);
+    const size_t payload = version == 2 ? kRecordV1 : kHeadV3 + static_cast<size_t>(packed);
+    if (payload + 4 > b.size() - at) break;
+    crc = fm::crc32(b.data() + at, payload);
+    std::memcpy(b.data() + at + payload, &crc, 4);
+    at += payload + 4;
   }
   return b;
 }
@@ -103,8 +111,11 @@ std::vector<uint8_t> withFixedCrcs(std::vector<uint8_t> b) {
   const fm::CameraModel cam = fm::CameraModel::pinhole(in);
   cv::Mat depth(1, 1, CV_32FC1, cv::Scalar(2.0f));
   map.integrate(depth, cam, Eigen::Isometry3d::Identity(), Eigen::Vector3d::Zero());
+  map.save(dir + "/fresh_v3.map");
   const std::string v2 = dir + "/fresh_v2.map";
-  map.save(v2);
+  fm::MapSaveOptions two;
+  two.format_version = 2;
+  map.save(v2, two);
   std::ifstream f(v2, std::ios::binary);
   std::vector<uint8_t> b((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
   if (b.size() < kHeaderV2) return;

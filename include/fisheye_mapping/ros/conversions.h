@@ -176,3 +176,23 @@ Eigen::Isometry3d toIsometry(const geometry_msgs::TransformStamped& t);
 }  // namespace fisheye_mapping
 
 #endif  // FISHEYE_MAPPING_ROS_CONVERSIONS_H_
+
+// ---------------------------------------------------------------------------
+// Compressed images (sensor_msgs/CompressedImage, as image_transport's
+// "compressed" plugin and bags recorded from it carry them)
+#ifndef FISHEYE_MAPPING_ROS_CONVERSIONS_COMPRESSED_H_
+#define FISHEYE_MAPPING_ROS_CONVERSIONS_COMPRESSED_H_
+
+#include <sensor_msgs/CompressedImage.h>
+
+namespace fisheye_mapping {
+
+/// The image of a CompressedImage (PNG, JPEG, ...: whatever cv::imdecode reads)
+/// as 8-bit grey (CV_8UC1), colour converted as cv::IMREAD_GRAYSCALE does.
+/// Throws ImageConversionError naming `source` and the message's format when
+/// the data is empty, is a compressedDepth image, or cannot be decoded.
+cv::Mat toGrey(const sensor_msgs::CompressedImage& msg, const std::string& source = "");
+
+}  // namespace fisheye_mapping
+
+#endif  // FISHEYE_MAPPING_ROS_CONVERSIONS_COMPRESSED_H_

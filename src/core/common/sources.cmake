@@ -1,4 +1,6 @@
 # Sources of the core's common stage (included by CMakeLists.txt).
 set(FM_COMMON_SOURCES
   opencl_context.cpp
+  paths.cpp
+  stage_stats.cpp
 )

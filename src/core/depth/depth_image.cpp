@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <stdexcept>
+#include <string>
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -36,6 +37,31 @@ void writeDepthTiff(const std::string& path, const cv::Mat& depth) {
     throw std::runtime_error(path + ": cannot write depth TIFF: " + e.what());
   }
   if (!ok) throw std::runtime_error(path + ": cannot write depth TIFF");
+}
+
+ZDepthConverter::ZDepthConverter(const CameraModel& camera)
+    : ray_z_(camera.height(), camera.width(), CV_32FC1) {
+  const std::vector<Eigen::Vector3f> rays = pixelRays(camera);
+  float* z = ray_z_.ptr<float>();
+  for (size_t i = 0; i < rays.size(); ++i) z[i] = rays[i].z() > 0.0f ? rays[i].z() : NAN;  // NaN ray: NaN
+}
+
+cv::Mat ZDepthConverter::convert(const cv::Mat& range) const {
+  if (range.type() != CV_32FC1) {
+    throw std::invalid_argument("z-depth: range image must be CV_32FC1, got type " + std::to_string(range.type()));
+  }
+  if (range.size() != ray_z_.size()) {
+    throw std::invalid_argument("z-depth: range image is " + std::to_string(range.cols) + "x" +
+                                std::to_string(range.rows) + " but the camera is " +
+                                std::to_string(ray_z_.cols) + "x" + std::to_string(ray_z_.rows));
+  }
+  cv::Mat z;
+  cv::multiply(range, ray_z_, z);  // IEEE: NaN in either factor gives NaN
+  return z;
+}
+
+cv::Mat rangeToZDepth(const cv::Mat& range, const CameraModel& camera) {
+  return ZDepthConverter(camera).convert(range);
 }
 
 }  // namespace fisheye_mapping

@@ -54,6 +54,11 @@ DepthStage::DepthStage(Rig rig, const DepthStageConfig& config) : rig_(std::move
   sweep_ = std::make_unique<PlaneSweep>(config.sweep);
 }
 
+void DepthStage::setSweepConfig(const PlaneSweepConfig& config) {
+  config.validate();
+  sweep_ = std::make_unique<PlaneSweep>(config);
+}
+
 DepthResult DepthStage::compute(const std::vector<cv::Mat>& images) {
   if (images.size() != rig_.cameras.size())
     throw std::invalid_argument("frame set has " + std::to_string(images.size()) + " images for a rig of " +

@@ -174,6 +174,7 @@ void PlaneSweepConfig::validate() const {
   require(std::isfinite(far) && far > near, "far", "must be greater than near");
   require(std::isfinite(ground_min) && std::isfinite(ground_max) && ground_max > ground_min, "ground_max",
           "must be greater than ground_min");
+  require(std::isfinite(ground_height), "ground_height", "must be a finite number of metres");
   require(window_full >= 3 && window_full % 2 == 1, "window_full", "must be odd and >= 3");
   require(window_half >= 3 && window_half % 2 == 1, "window_half", "must be odd and >= 3");
   require(aggregation == SweepAggregation::Average || aggregation == SweepAggregation::BestK, "aggregation",
@@ -214,7 +215,8 @@ std::vector<FmSweepPlane> makeSweepPlanes(const PlaneSweepConfig& config, const 
     const Eigen::Vector3d n = -(T_base_ref->linear().transpose() * Eigen::Vector3d::UnitZ());
     const double tz = T_base_ref->translation().z();
     for (int i = 0; i < config.ground_planes; ++i) {
-      const double h = config.ground_min + (config.ground_max - config.ground_min) * i / (config.ground_planes - 1);
+      const double h = config.ground_height + config.ground_min +
+                       (config.ground_max - config.ground_min) * i / (config.ground_planes - 1);
       const double d = tz - h;
       if (!(d > 0.0)) continue;  // plane at or above the camera: never seen from above
       FmSweepPlane p{};
@@ -665,12 +667,15 @@ DepthFilterConfig DepthFilterConfig::fromParams(const ParamSource& p, DepthFilte
   return f;
 }
 
-PlaneSweepConfig PlaneSweepConfig::fromParams(const ParamSource& p) {
-  PlaneSweepConfig c;
+PlaneSweepConfig PlaneSweepConfig::fromParams(const ParamSource& p) { return fromParams(p, PlaneSweepConfig()); }
+
+PlaneSweepConfig PlaneSweepConfig::fromParams(const ParamSource& p, PlaneSweepConfig base) {
+  PlaneSweepConfig& c = base;
   p.get("fronto_planes", c.fronto_planes);
   p.get("near", c.near);
   p.get("far", c.far);
   p.get("ground_planes", c.ground_planes);
+  p.get("ground_height", c.ground_height);
   p.get("ground_min", c.ground_min);
   p.get("ground_max", c.ground_max);
   p.get("window_full", c.window_full);

@@ -23,8 +23,8 @@ void DepthMaskConfig::validate() const {
           colour_far);
 }
 
-DepthMaskConfig DepthMaskConfig::fromParams(const ParamSource& p) {
-  DepthMaskConfig c;
+DepthMaskConfig DepthMaskConfig::fromParams(const ParamSource& p, DepthMaskConfig base) {
+  DepthMaskConfig c = std::move(base);
   p.get("margin_px", c.margin_px);
   p.get("wait_for_detections", c.wait_for_detections);
   p.get("max_pending", c.max_pending);

@@ -222,8 +222,8 @@ void DetectorStageConfig::validate() const {
     throw std::invalid_argument("dnn_target: not a target (" + std::to_string(int(dnn_target)) + ")");
 }
 
-DetectorStageConfig DetectorStageConfig::fromParams(const ParamSource& p) {
-  DetectorStageConfig c;
+DetectorStageConfig DetectorStageConfig::fromParams(const ParamSource& p, DetectorStageConfig base) {
+  DetectorStageConfig c = std::move(base);
   p.get("model_config", c.model_config);
   if (double v; p.get("score_threshold", v)) c.score_threshold = static_cast<float>(v);
   if (double v; p.get("nms_threshold", v)) c.nms_threshold = static_cast<float>(v);
@@ -574,6 +574,15 @@ Detector::Detector(const DetectorConfig& cfg, const DnnDevice& device) : cfg_(cf
 }
 
 Detector::~Detector() = default;
+
+void Detector::setThresholds(float score_threshold, float nms_threshold) {
+  if (!scoreThresholdOk(score_threshold))
+    throw std::invalid_argument("score_threshold: must be in (0, 1), got " + number(score_threshold));
+  if (!nmsThresholdOk(nms_threshold))
+    throw std::invalid_argument("nms_threshold: must be in (0, 1], got " + number(nms_threshold));
+  cfg_.score_threshold = score_threshold;
+  cfg_.nms_threshold = nms_threshold;
+}
 
 std::vector<Detection> Detector::detect(const cv::Mat& image, bool only_moving) {
   Letterbox lb;

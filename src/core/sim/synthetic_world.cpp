@@ -71,11 +71,11 @@ bool rayBox(const Eigen::Vector3d& o, const Eigen::Vector3d& d, const Eigen::Vec
   return true;
 }
 
-// Car-like shape in the vehicle frame (x forward, z up): body and cabin.
-const Box kCarParts[2] = {
-    {Eigen::Vector3d(-2.2, -0.9, 0.3), Eigen::Vector3d(2.2, 0.9, 1.1), kCarPaint, 0.0f, 0},
-    {Eigen::Vector3d(-1.0, -0.8, 1.1), Eigen::Vector3d(1.2, 0.8, 1.55), kCarPaint, 0.0f, 0},
-};
+// Kinds of the moving vehicles: mostly cars, some vans, trucks and buses.
+VehicleKind drawKind(double u, double car, double van, double truck) {
+  return u < car ? VehicleKind::kCar : u < car + van ? VehicleKind::kVan : u < car + van + truck ? VehicleKind::kTruck
+                                                                                               : VehicleKind::kBus;
+}
 
 }  // namespace
 
@@ -237,6 +237,46 @@ Eigen::Isometry3d World::egoPose(double t) const {
   return T;
 }
 
+Eigen::Isometry3d World::vehiclePoseById(int id, double t) const {
+  if (id < 0 || id >= numVehicleIds()) throw std::out_of_range("no vehicle with id " + std::to_string(id));
+  return isMoving(id) ? vehiclePose(id, t) : parked_poses_[id - numVehicles()];
+}
+
+int World::addParkedVehicle(const VehicleDims& dims, const Eigen::Isometry3d& pose) {
+  models_.emplace_back(dims);
+  parked_poses_.push_back(pose);
+  if (!cells_.empty()) indexGrid();  // after construction: index it now
+  return numVehicleIds() - 1;
+}
+
+void World::addParkedRow(const Eigen::Vector2d& a, const Eigen::Vector2d& dir, const Eigen::Vector2d& left,
+                         double len, std::mt19937& rng) {
+  // Parked vehicles in the parking strip, most along the kerb, some angled
+  // (up to 8 degrees, so they stay clear of the lane), facing either way.
+  std::uniform_real_distribution<double> U(0.0, 1.0);
+  const double edge = kRoadHalfWidth + kSidewalk;
+  for (double s = edge + 4 + 4 * U(rng); s < len - edge - 6;) {
+    if (U(rng) < 0.35) {
+      s += 3 + 6 * U(rng);
+      continue;
+    }
+    const VehicleDims dims = drawVehicle(drawKind(U(rng), 0.68, 0.2, 0.08), rng);
+    if (s + dims.length > len - edge - 2) break;
+    const double angle = dims.length < 6 && U(rng) < 0.3 ? (U(rng) < 0.5 ? -1 : 1) * (4 + 4 * U(rng)) * M_PI / 180
+                                                         : (U(rng) - 0.5) * 2 * M_PI / 180;
+    // Wide vehicles stand with two wheels on the kerb, leaving the lane clear.
+    const double half_lateral = 0.5 * (dims.length * std::abs(std::sin(angle)) + dims.width * std::cos(angle));
+    const double outer = dims.width > 2.0 ? kRoadHalfWidth + 0.5 : kRoadHalfWidth - 0.1;
+    const Eigen::Vector2d c = a + (s + 0.5 * dims.length) * dir + (outer - half_lateral) * left;
+    const double heading = std::atan2(dir.y(), dir.x()) + (U(rng) < 0.5 ? M_PI : 0.0) + angle;
+    Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+    T.linear() = Eigen::AngleAxisd(heading, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    T.translation() = Eigen::Vector3d(c.x(), c.y(), 0.0);
+    addParkedVehicle(dims, T);
+    s += dims.length + 0.8 + 2.5 * U(rng);
+  }
+}
+
 Eigen::Isometry3d World::vehiclePose(int i, double t) const {
   const MovingVehicle& v = vehicles_[i];
   Eigen::Vector2d tan;
@@ -285,13 +325,7 @@ void World::addStreetSide(const Eigen::Vector2d& a, const Eigen::Vector2d& b, co
       const Eigen::Vector2d c = a + (s + 0.15) * dir + (l + 0.15) * left;
       spheres_.push_back({Eigen::Vector3d(c.x(), c.y(), 3.3 + r), r, kFoliage, 0.6f + 0.2f * static_cast<float>(U(rng))});
     }
-    for (double s = edge + 4; s < len - edge - 6; s += 6 + 8 * U(rng)) {
-      if (U(rng) < 0.5) continue;
-      const float paint = 0.15f + 0.7f * static_cast<float>(U(rng));
-      box2(s, s + 4.4, kRoadHalfWidth - 1.85, kRoadHalfWidth - 0.05, 0.3, 1.1, kCarPaint, paint);
-      box2(s + 1.0, s + 3.2, kRoadHalfWidth - 1.75, kRoadHalfWidth - 0.15, 1.1, 1.5, kCarPaint, paint);
-      s += 4.4;
-    }
+    addParkedRow(a, dir, left, len, rng);
   } else if (config_.preset == "forest") {
     for (double s = edge - 2; s < len - edge + 2; s += 3 + 5 * U(rng)) {
       const double l = kRoadHalfWidth + 2.0 + 12.0 * U(rng) * U(rng);
@@ -304,6 +338,27 @@ void World::addStreetSide(const Eigen::Vector2d& a, const Eigen::Vector2d& b, co
 }
 
 void World::build() {
+  // Moving vehicles (ids 0 .., before the parked ones): half oncoming (left
+  // lane, against the route), half overtaking (ego lane, faster than the ego,
+  // starting behind it).
+  std::mt19937 rng(config_.seed * 104729u + 3u);
+  std::uniform_real_distribution<double> U(0.0, 1.0);
+  for (int i = 0; i < config_.moving_vehicles; ++i) {
+    MovingVehicle v;
+    const VehicleDims dims = drawVehicle(drawKind(U(rng), 0.55, 0.2, 0.12), rng);
+    models_.emplace_back(dims);
+    v.albedo = dims.paint;
+    if (i % 2 == 0) {
+      v.lateral = (i % 4 == 0 ? 0.5 : 1.5) * kLane;
+      v.speed = -(6 + 6 * U(rng));
+      v.s0 = 60 + (config_.route_length + 80) * (i / 2 + 0.5 + 0.3 * U(rng)) / std::max(1, (config_.moving_vehicles + 1) / 2);
+    } else {
+      v.lateral = -0.5 * kLane;  // inner lane: passes the ego on its left
+      v.speed = config_.speed + 3 + 4 * U(rng);
+      v.s0 = 20 - 15 - 40 * (i / 2) - 20 * U(rng);
+    }
+    vehicles_.push_back(v);
+  }
   // Streets the route runs along, with both sides furnished, segment by segment
   // between intersections, plus the cross streets' corners.
   std::set<std::tuple<int, int, int, int>> done;
@@ -325,24 +380,6 @@ void World::build() {
       }
     }
   }
-  // Moving vehicles: half oncoming (left lane, against the route), half
-  // overtaking (ego lane, faster than the ego, starting behind it).
-  std::mt19937 rng(config_.seed * 104729u + 3u);
-  std::uniform_real_distribution<double> U(0.0, 1.0);
-  for (int i = 0; i < config_.moving_vehicles; ++i) {
-    MovingVehicle v;
-    v.albedo = 0.15f + 0.7f * static_cast<float>(U(rng));
-    if (i % 2 == 0) {
-      v.lateral = (i % 4 == 0 ? 0.5 : 1.5) * kLane;
-      v.speed = -(6 + 6 * U(rng));
-      v.s0 = 60 + (config_.route_length + 80) * (i / 2 + 0.5 + 0.3 * U(rng)) / std::max(1, (config_.moving_vehicles + 1) / 2);
-    } else {
-      v.lateral = -0.5 * kLane;  // inner lane: passes the ego on its left
-      v.speed = config_.speed + 3 + 4 * U(rng);
-      v.s0 = 20 - 15 - 40 * (i / 2) - 20 * U(rng);
-    }
-    vehicles_.push_back(v);
-  }
 }
 
 void World::indexGrid() {
@@ -360,6 +397,11 @@ void World::indexGrid() {
       for (int x = x0; x <= x1; ++x) cells_[static_cast<size_t>(y) * grid_w_ + x].push_back(id);
   };
   for (size_t i = 0; i < boxes_.size(); ++i) add(boxes_[i].lo, boxes_[i].hi, static_cast<int>(i));
+  for (size_t j = 0; j < parked_poses_.size(); ++j) {
+    const Eigen::Vector3d r = Eigen::Vector3d::Constant(models_[numVehicles() + j].radius());
+    const Eigen::Vector3d& c = parked_poses_[j].translation();
+    add(c - r, c + r, static_cast<int>(boxes_.size() + j));
+  }
   for (size_t i = 0; i < spheres_.size(); ++i) {
     const Eigen::Vector3d r = Eigen::Vector3d::Constant(spheres_[i].r);
     add(spheres_[i].c - r, spheres_[i].c + r, ~static_cast<int>(i));
@@ -402,7 +444,10 @@ Hit World::cast(const Eigen::Vector3d& o, const Eigen::Vector3d& d, const std::v
       for (int id : cells_[static_cast<size_t>(iy) * grid_w_ + ix]) {
         double t;
         Eigen::Vector3d n;
-        if (id >= 0) {
+        if (id >= static_cast<int>(boxes_.size())) {
+          const int vid = numVehicles() + id - static_cast<int>(boxes_.size());
+          castVehicle(vid, parked_poses_[vid - numVehicles()], o, d, &best);
+        } else if (id >= 0) {
           const Box& b = boxes_[id];
           if (rayBox(o, d, b.lo, b.hi, &t, &n) && t < best.t) {
             best.t = t, best.n = n, best.material = b.material, best.albedo = b.albedo, best.object = -1;
@@ -431,22 +476,50 @@ Hit World::cast(const Eigen::Vector3d& o, const Eigen::Vector3d& d, const std::v
       t_cell = next_y, next_y += inv_y, iy += step_y;
     }
   }
-  // Moving vehicles (oriented boxes).
-  for (int i = 0; i < static_cast<int>(vehicles.size()); ++i) {
-    const Eigen::Isometry3d& T = vehicles[i];
-    if ((T.translation() - o).squaredNorm() > (best.t + 5) * (best.t + 5)) continue;
-    const Eigen::Vector3d ol = T.inverse() * o, dl = T.linear().transpose() * d;
-    for (const Box& part : kCarParts) {
-      double t;
-      Eigen::Vector3d n;
-      if (rayBox(ol, dl, part.lo, part.hi, &t, &n) && t < best.t) {
-        best.t = t, best.n = T.linear() * n, best.material = kCarPaint, best.albedo = vehicles_[i].albedo;
-        best.object = i;
-      }
+  for (int i = 0; i < static_cast<int>(vehicles.size()); ++i) castVehicle(i, vehicles[i], o, d, &best);
+  if (best.t >= max_range) return Hit();
+  if (best.material == kAsphalt) best.albedo = groundShadow(o + best.t * d, vehicles);
+  return best;
+}
+
+bool World::castVehicle(int id, const Eigen::Isometry3d& T_W_V, const Eigen::Vector3d& o, const Eigen::Vector3d& d,
+                        Hit* best) const {
+  const VehicleModel& model = models_[id];
+  // Bounding sphere first: most rays pass far from most vehicles.
+  const Eigen::Vector3d oc = T_W_V.translation() - o;
+  const double along = oc.dot(d), r = model.radius();
+  if (along + r < 0 || along - r > best->t || oc.squaredNorm() - along * along > r * r) return false;
+  const Eigen::Vector3d ol = T_W_V.inverse() * o, dl = T_W_V.linear().transpose() * d;
+  VehicleModel::LocalHit h;
+  if (!model.intersect(ol, dl, best->t, &h)) return false;
+  best->t = h.t, best->n = T_W_V.linear() * h.n, best->material = h.material, best->albedo = h.albedo;
+  best->object = id;
+  return true;
+}
+
+float World::groundShadow(const Eigen::Vector3d& p, const std::vector<Eigen::Isometry3d>& vehicles) const {
+  // Ambient occlusion under a vehicle: dark under the body, fading over 0.4 m
+  // beyond the footprint.
+  float factor = 1.0f;
+  auto under = [&](int id, const Eigen::Isometry3d& T) {
+    const VehicleModel& m = models_[id];
+    if ((T.translation() - p).squaredNorm() > m.radius() * m.radius()) return;
+    const Eigen::Vector3d q = T.inverse() * p;
+    const double out = std::max(std::abs(q.x()) - 0.5 * m.dims().length, std::abs(q.y()) - 0.5 * m.dims().width);
+    const double dark = std::clamp(0.5 - out / 0.4, 0.0, 1.0);  // 1 well inside, 0 beyond 0.2 m outside
+    factor = std::min(factor, static_cast<float>(1.0 - 0.7 * dark));
+  };
+  for (int i = 0; i < static_cast<int>(vehicles.size()); ++i) under(i, vehicles[i]);
+  const int ix = static_cast<int>(std::floor((p.x() - grid_min_.x()) / cell_));
+  const int iy = static_cast<int>(std::floor((p.y() - grid_min_.y()) / cell_));
+  if (ix >= 0 && iy >= 0 && ix < grid_w_ && iy < grid_h_) {
+    for (int id : cells_[static_cast<size_t>(iy) * grid_w_ + ix]) {
+      if (id < static_cast<int>(boxes_.size())) continue;
+      const int vid = numVehicles() + id - static_cast<int>(boxes_.size());
+      under(vid, parked_poses_[vid - numVehicles()]);
     }
   }
-  if (best.t >= max_range) best = Hit();
-  return best;
+  return factor;
 }
 
 float World::shade(const Hit& h, const Eigen::Vector3d& p) const {
@@ -470,8 +543,9 @@ float World::shade(const Hit& h, const Eigen::Vector3d& p) const {
         const bool lane_line = std::abs(dist - kLane) < 0.075 && std::fmod(std::abs(along), 6.0) < 3.0;
         const bool edge_line = dist > 2 * kLane - 0.05 && dist < 2 * kLane + 0.1;
         if (!crossing && (centre || lane_line || edge_line)) albedo = 0.85f;
+        albedo *= h.albedo;  // shadow under vehicles
       } else if (config_.preset == "urban" && dist < kRoadHalfWidth + 0.3) {
-        albedo = 0.62f + 0.05f * noise(p * 10.0, seed + 6);
+        albedo = (0.62f + 0.05f * noise(p * 10.0, seed + 6)) * h.albedo;
       } else if (config_.preset == "urban" && dist < kRoadHalfWidth + kSidewalk) {
         const bool joint = std::fmod(std::abs(along), 0.6) < 0.03 || std::fmod(dist, 0.6) < 0.03;
         albedo = joint ? 0.35f : 0.55f + 0.1f * fbm(p * 5.0, seed + 7);
@@ -504,12 +578,13 @@ float World::shade(const Hit& h, const Eigen::Vector3d& p) const {
     case kBark:
       albedo = h.albedo + 0.15f * (noise(Eigen::Vector3d(p.x() * 8, p.y() * 8, p.z() * 1.5), seed + 13) - 0.5f);
       break;
-    case kCarPaint:
-      albedo = (p.z() > 1.12 && std::abs(h.n.z()) < 0.5) ? 0.1f : h.albedo;  // windows on the cabin
+    case kCarPaint:  // faint dirt and sheen: more texture than the glass, less than a wall
+      albedo = h.albedo * (0.97f + 0.06f * noise(p * 3.0, seed + 16));
       break;
     default:
       break;
   }
+  if (h.material == kLight) return h.albedo;  // lamps shine whatever the sun
   static const Eigen::Vector3d sun = Eigen::Vector3d(0.45, 0.3, 0.84).normalized();
   const double lambert = std::max(0.0, h.n.dot(sun));
   return static_cast<float>(std::clamp(albedo, 0.0f, 1.0f) * (0.45 + 0.55 * lambert));
@@ -528,6 +603,7 @@ World::Frame World::render(const CameraModel& camera, const std::vector<Eigen::V
   const float vignetting_floor = 1.0f - 1.5f * vignetting;
   f.depth.create(h, w, CV_32FC1);
   f.ids.create(h, w, CV_16SC1);
+  f.materials.create(h, w, CV_8UC1);
   const Eigen::Vector3d o = T_W_C.translation();
   const Eigen::Matrix3d R = T_W_C.linear();
   const std::vector<Eigen::Isometry3d> vehicles = vehiclePoses(time);
@@ -536,11 +612,13 @@ World::Frame World::render(const CameraModel& camera, const std::vector<Eigen::V
     float* img = radiance.ptr<float>(v);
     float* dep = f.depth.ptr<float>(v);
     int16_t* ids = f.ids.ptr<int16_t>(v);
+    uint8_t* mat = f.materials.ptr<uint8_t>(v);
     for (int u = 0; u < w; ++u) {
       const Eigen::Vector3f& rc = rays[static_cast<size_t>(v) * w + u];
       float intensity = 0.0f;
       dep[u] = NAN;
       ids[u] = -1;
+      mat[u] = kSky;
       if (rc.z() == rc.z()) {
         const Eigen::Vector3d d = R * rc.cast<double>();
         const Hit hit = cast(o, d, vehicles);
@@ -548,6 +626,7 @@ World::Frame World::render(const CameraModel& camera, const std::vector<Eigen::V
           intensity = shade(hit, o + hit.t * d);
           dep[u] = static_cast<float>(hit.t);
           ids[u] = static_cast<int16_t>(hit.object);
+          mat[u] = hit.material;
         } else {
           intensity = 0.88f + 0.06f * static_cast<float>(std::max(0.0, d.z()));  // plain sky
           if (config_.clouds > 0) {  // clouds: a texture on the directions, at infinity
@@ -612,6 +691,10 @@ void World::saveStaticMeshPly(const std::string& path) const {
     quad({l.x(), l.y(), l.z()}, {l.x(), l.y(), h.z()}, {l.x(), h.y(), h.z()}, {l.x(), h.y(), l.z()});
     quad({h.x(), l.y(), l.z()}, {h.x(), h.y(), l.z()}, {h.x(), h.y(), h.z()}, {h.x(), l.y(), h.z()});
     quad({l.x(), l.y(), h.z()}, {h.x(), l.y(), h.z()}, {h.x(), h.y(), h.z()}, {l.x(), h.y(), h.z()});
+  }
+  for (size_t j = 0; j < parked_poses_.size(); ++j) {
+    const Eigen::Isometry3d& T = parked_poses_[j];
+    for (const auto& t : models_[numVehicles() + j].triangles()) tri(T * t[0], T * t[1], T * t[2]);
   }
   for (const Sphere& s : spheres_) {
     const int nu = 16, nv = 8;

@@ -3,6 +3,7 @@
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
+#include <utility>
 #include <vector>
 
 #include "fisheye_mapping/core/common/params.h"
@@ -47,8 +48,8 @@ void TsdfConfig::validate() const {
     throw std::invalid_argument("TsdfConfig.integrator: not an integrator (" + std::to_string(int(integrator)) + ")");
 }
 
-TsdfConfig TsdfConfig::fromParams(const ParamSource& p) {
-  TsdfConfig c;
+TsdfConfig TsdfConfig::fromParams(const ParamSource& p, TsdfConfig base) {
+  TsdfConfig c = std::move(base);
   p.get("voxel_size", c.voxel_size);
   p.get("truncation_voxels", c.truncation_voxels);
   double max_weight = c.max_weight;

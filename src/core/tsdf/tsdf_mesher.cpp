@@ -8,7 +8,13 @@
 
 #include <omp.h>
 
+#include <opencv2/imgproc.hpp>
+
+#include <algorithm>
 #include <array>
+#include <cmath>
+#include <cstring>
+#include <utility>
 
 namespace fisheye_mapping {
 namespace {
@@ -20,12 +26,152 @@ constexpr int kEdge[12][2] = {{0, 1}, {1, 2}, {2, 3}, {3, 0}, {4, 5}, {5, 6},
                               {6, 7}, {7, 4}, {0, 4}, {1, 5}, {2, 6}, {3, 7}};
 constexpr int N = FM_BLOCK_SIDE + 1;  // the block plus one layer of its +x/+y/+z neighbours
 
-Eigen::Vector3f interpolate(const Eigen::Vector3f& a, const Eigen::Vector3f& b, float va, float vb) {
+// The zero crossing on the grid edge from global voxel g (value va) to its
+// +axis neighbour (value vb), from the edge alone: every cube and block that
+// shares the edge gets the same bits (in double, (g + 0.5 + t) is exact at
+// t = 0 and t = 1, so a crossing on a corner matches from every edge there).
+Eigen::Vector3f edgeCrossing(const Eigen::Vector3i& g, int axis, float va, float vb, double voxel_size) {
   const float t = va / (va - vb);
-  return a + t * (b - a);
+  Eigen::Vector3d p = g.cast<double>() + Eigen::Vector3d::Constant(0.5);
+  p[axis] += t;
+  return (p * voxel_size).cast<float>();
+}
+
+// The axis along which edge e of a cube runs.
+int edgeAxis(int e) {
+  const int a = kEdge[e][0], b = kEdge[e][1];
+  return kCorner[a][0] != kCorner[b][0] ? 0 : kCorner[a][1] != kCorner[b][1] ? 1 : 2;
 }
 
 }  // namespace
+
+namespace {
+
+// Exact position equality, with -0 and +0 alike (adding +0 turns -0 into +0).
+struct PositionHash {
+  size_t operator()(const Eigen::Vector3f& p) const {
+    size_t h = 0;
+    for (int a = 0; a < 3; ++a) {
+      const float v = p[a] + 0.0f;
+      uint32_t bits;
+      std::memcpy(&bits, &v, sizeof(bits));
+      h = h * 0x9E3779B97F4A7C15ull + bits;
+    }
+    return h;
+  }
+};
+struct PositionEqual {
+  bool operator()(const Eigen::Vector3f& a, const Eigen::Vector3f& b) const { return a == b; }
+};
+
+// Area-weighted vertex normals: the sum of the faces' cross products (twice
+// their areas times their unit normals), normalized.
+std::vector<Eigen::Vector3f> vertexNormals(const IndexedMesh& mesh) {
+  std::vector<Eigen::Vector3f> n(mesh.vertices.size(), Eigen::Vector3f::Zero());
+  for (const auto& f : mesh.faces) {
+    const Eigen::Vector3f& a = mesh.vertices[f[0]];
+    const Eigen::Vector3f c = (mesh.vertices[f[1]] - a).cross(mesh.vertices[f[2]] - a);
+    for (uint32_t v : f) n[v] += c;
+  }
+  for (auto& v : n) v.normalize();
+  return n;
+}
+
+// The height ramp, one entry per degree of hue (240 at index 0 down to 0 at
+// 240), converted once by OpenCV (HSV to RGB, float).
+constexpr int kRampSteps = 240;
+const std::array<std::array<uint8_t, 3>, kRampSteps + 1>& heightRamp() {
+  static const std::array<std::array<uint8_t, 3>, kRampSteps + 1> ramp = [] {
+    cv::Mat hsv(1, kRampSteps + 1, CV_32FC3), rgb;
+    for (int i = 0; i <= kRampSteps; ++i) hsv.at<cv::Vec3f>(0, i) = cv::Vec3f(240.0f - i, 1.0f, 1.0f);
+    cv::cvtColor(hsv, rgb, cv::COLOR_HSV2RGB);
+    std::array<std::array<uint8_t, 3>, kRampSteps + 1> out;
+    for (int i = 0; i <= kRampSteps; ++i) {
+      for (int c = 0; c < 3; ++c) out[i][c] = cv::saturate_cast<uint8_t>(255.0f * rgb.at<cv::Vec3f>(0, i)[c]);
+    }
+    return out;
+  }();
+  return ramp;
+}
+
+std::vector<std::array<uint8_t, 3>> heightColors(const std::vector<Eigen::Vector3f>& vertices,
+                                                 const MeshExportOptions& options) {
+  double lo = options.z_min, hi = options.z_max;
+  if (std::isnan(lo) || std::isnan(hi)) {
+    double mn = INFINITY, mx = -INFINITY;
+    for (const auto& v : vertices) mn = std::min<double>(mn, v.z()), mx = std::max<double>(mx, v.z());
+    if (std::isnan(lo)) lo = mn;
+    if (std::isnan(hi)) hi = mx;
+  }
+  const double span = hi > lo ? hi - lo : 1.0;
+  std::vector<std::array<uint8_t, 3>> out;
+  out.reserve(vertices.size());
+  for (const auto& v : vertices) out.push_back(heightColor((v.z() - lo) / span));
+  return out;
+}
+
+}  // namespace
+
+std::array<uint8_t, 3> heightColor(double s) {
+  const double c = s > 0.0 ? std::min(s, 1.0) : 0.0;  // NaN -> 0
+  return heightRamp()[static_cast<int>(std::lround(c * kRampSteps))];
+}
+
+IndexedMesh weldTriangles(const std::vector<Eigen::Vector3f>& triangles, const MeshExportOptions& options) {
+  IndexedMesh mesh;
+  std::unordered_map<Eigen::Vector3f, uint32_t, PositionHash, PositionEqual> index;
+  index.reserve(triangles.size() / 2);
+  mesh.faces.reserve(triangles.size() / 3);
+  for (size_t t = 0; t + 2 < triangles.size(); t += 3) {
+    const Eigen::Vector3f* p = &triangles[t];
+    // Two corners on one point: no area, no face (and no vertex of its own).
+    if (p[0] == p[1] || p[1] == p[2] || p[0] == p[2]) continue;
+    std::array<uint32_t, 3> f;
+    for (int c = 0; c < 3; ++c) {
+      const auto [it, fresh] = index.emplace(p[c], static_cast<uint32_t>(mesh.vertices.size()));
+      if (fresh) mesh.vertices.push_back(p[c]);
+      f[c] = it->second;
+    }
+    mesh.faces.push_back(f);
+  }
+  mesh.normals = vertexNormals(mesh);
+  if (options.coloring == MeshColoring::kHeight) mesh.colors = heightColors(mesh.vertices, options);
+  return mesh;
+}
+
+void saveIndexedMeshPly(const IndexedMesh& mesh, const std::string& path) {
+  const bool color = !mesh.colors.empty();
+  pcl::PolygonMesh out;
+  if (color) {
+    pcl::PointCloud<pcl::PointXYZRGBNormal> cloud;
+    cloud.resize(mesh.vertices.size());
+    for (size_t i = 0; i < mesh.vertices.size(); ++i) {
+      auto& p = cloud[i];
+      p.getVector3fMap() = mesh.vertices[i];
+      p.getNormalVector3fMap() = mesh.normals[i];
+      p.r = mesh.colors[i][0], p.g = mesh.colors[i][1], p.b = mesh.colors[i][2];
+    }
+    pcl::toPCLPointCloud2(cloud, out.cloud);
+  } else {
+    pcl::PointCloud<pcl::PointNormal> cloud;
+    cloud.resize(mesh.vertices.size());
+    for (size_t i = 0; i < mesh.vertices.size(); ++i) {
+      cloud[i].getVector3fMap() = mesh.vertices[i];
+      cloud[i].getNormalVector3fMap() = mesh.normals[i];
+    }
+    pcl::toPCLPointCloud2(cloud, out.cloud);
+  }
+  // The writer takes each field at its offset: leaving curvature out of the
+  // list leaves it out of the file.
+  auto& fields = out.cloud.fields;
+  fields.erase(std::remove_if(fields.begin(), fields.end(), [](const auto& f) { return f.name == "curvature"; }),
+               fields.end());
+  out.polygons.resize(mesh.faces.size());
+  for (size_t f = 0; f < mesh.faces.size(); ++f) {
+    out.polygons[f].vertices.assign(mesh.faces[f].begin(), mesh.faces[f].end());
+  }
+  if (pcl::io::savePLYFileBinary(path, out) != 0) throw std::runtime_error(path + ": cannot write PLY mesh");
+}
 
 BlockOutput TsdfMesher::computeBlock(const TsdfMap& map, const BlockIndex& index) const {
   BlockOutput out;
@@ -52,9 +198,8 @@ BlockOutput TsdfMesher::computeBlock(const TsdfMap& map, const BlockIndex& index
       }
     }
   }
-  const float vs = static_cast<float>(map.config().voxel_size);
-  const Eigen::Vector3f origin = ((index * FM_BLOCK_SIDE).cast<float>() + Eigen::Vector3f::Constant(0.5f)) * vs;
-  auto position = [&](int i, int j, int k) -> Eigen::Vector3f { return origin + Eigen::Vector3f(i, j, k) * vs; };
+  const double vs = map.config().voxel_size;
+  const Eigen::Vector3i first = index * FM_BLOCK_SIDE;  // global index of local voxel (0, 0, 0)
 
   for (int k = 0; k < FM_BLOCK_SIDE; ++k) {
     for (int j = 0; j < FM_BLOCK_SIDE; ++j) {
@@ -63,11 +208,11 @@ BlockOutput TsdfMesher::computeBlock(const TsdfMap& map, const BlockIndex& index
         const float v0 = at(i, j, k);
         if (v0 == v0) {
           const int nbr[3][3] = {{i + 1, j, k}, {i, j + 1, k}, {i, j, k + 1}};
-          for (const auto& q : nbr) {
+          for (int axis = 0; axis < 3; ++axis) {
+            const int* q = nbr[axis];
             const float v1 = at(q[0], q[1], q[2]);
             if (v1 == v1 && ((v0 < 0) != (v1 < 0))) {
-              out.surface_points.push_back(
-                  interpolate(position(i, j, k), position(q[0], q[1], q[2]), v0, v1));
+              out.surface_points.push_back(edgeCrossing(first + Eigen::Vector3i(i, j, k), axis, v0, v1, vs));
             }
           }
         }
@@ -84,10 +229,12 @@ BlockOutput TsdfMesher::computeBlock(const TsdfMap& map, const BlockIndex& index
         Eigen::Vector3f edge_vertex[12];
         for (int e = 0; e < 12; ++e) {
           if (pcl::edgeTable[cube] & (1 << e)) {
-            const int a = kEdge[e][0], b = kEdge[e][1];
-            edge_vertex[e] = interpolate(
-                position(i + kCorner[a][0], j + kCorner[a][1], k + kCorner[a][2]),
-                position(i + kCorner[b][0], j + kCorner[b][1], k + kCorner[b][2]), cv[a], cv[b]);
+            // From the edge's lower corner, whatever the table's direction.
+            const int axis = edgeAxis(e);
+            int a = kEdge[e][0], b = kEdge[e][1];
+            if (kCorner[a][axis] > kCorner[b][axis]) std::swap(a, b);
+            const Eigen::Vector3i g = first + Eigen::Vector3i(i + kCorner[a][0], j + kCorner[a][1], k + kCorner[a][2]);
+            edge_vertex[e] = edgeCrossing(g, axis, cv[a], cv[b], vs);
           }
         }
         for (int t = 0; pcl::triTable[cube][t] != -1; t += 3) {
@@ -163,22 +310,15 @@ pcl::PointCloud<pcl::PointXYZ> TsdfMesher::surfaceCloud() const {
   return cloud;
 }
 
-void TsdfMesher::saveMeshPly(const std::string& path) const {
-  pcl::PointCloud<pcl::PointXYZ> vertices;
-  pcl::PolygonMesh mesh;
-  for (const auto& kv : blocks_) {
-    for (size_t t = 0; t + 2 < kv.second.triangles.size(); t += 3) {
-      pcl::Vertices tri;
-      for (int c = 0; c < 3; ++c) {
-        const Eigen::Vector3f& p = kv.second.triangles[t + c];
-        tri.vertices.push_back(static_cast<std::uint32_t>(vertices.size()));
-        vertices.push_back(pcl::PointXYZ(p.x(), p.y(), p.z()));
-      }
-      mesh.polygons.push_back(tri);
-    }
-  }
-  pcl::toPCLPointCloud2(vertices, mesh.cloud);
-  if (pcl::io::savePLYFileBinary(path, mesh) != 0) throw std::runtime_error(path + ": cannot write PLY mesh");
+IndexedMesh TsdfMesher::indexedMesh(const MeshExportOptions& options) const {
+  std::vector<Eigen::Vector3f> soup;
+  soup.reserve(numTriangles() * 3);
+  for (const auto& kv : blocks_) soup.insert(soup.end(), kv.second.triangles.begin(), kv.second.triangles.end());
+  return weldTriangles(soup, options);
+}
+
+void TsdfMesher::saveMeshPly(const std::string& path, const MeshExportOptions& options) const {
+  saveIndexedMeshPly(indexedMesh(options), path);
 }
 
 void TsdfMesher::saveCloudPcd(const std::string& path) const {

@@ -51,6 +51,11 @@ class DepthStage {
 
   // Changes the filters of the sweep (dynamic reconfiguration); validated.
   void setFilters(const DepthFilterConfig& filters) { sweep_->setFilters(filters); }
+  // Replaces the sweep with one of `config` (dynamic reconfiguration of its
+  // planes, views or matching: the planes and the backend are built anew; the
+  // rig, views and masks stay). Throws std::invalid_argument naming the field,
+  // and then keeps the running sweep.
+  void setSweepConfig(const PlaneSweepConfig& config);
 
   const Rig& rig() const { return rig_; }
   int reference() const { return ref_; }

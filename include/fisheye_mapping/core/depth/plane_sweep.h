@@ -99,7 +99,12 @@ struct PlaneSweepConfig {
   double near = 1.5;
   double far = 60.0;
   int ground_planes = 30;        // 0 disables the family
-  double ground_min = -0.3;      // plane heights above the base frame's ground, metres
+  // z of the road in the base frame, metres: 0 when the base frame lies on the
+  // ground (base_footprint), e.g. -0.3 when base_link is the rear axle 0.3 m
+  // above the road. The ground-plane family spans heights
+  // ground_height + [ground_min, ground_max] of the base frame.
+  double ground_height = 0.0;
+  double ground_min = -0.3;      // plane heights above the ground (ground_height), metres
   double ground_max = 0.3;
   // Matching.
   int window_full = 9;           // odd window sizes
@@ -139,6 +144,9 @@ struct PlaneSweepConfig {
   // (filters under the names of cfg/PlaneSweepFilters.cfg; the enumerations
   // as their strings, parsed here); validated. band_rows is not a parameter.
   static PlaneSweepConfig fromParams(const ParamSource& p);
+  // The same over `base` instead of the defaults (a dynamic_reconfigure
+  // callback: what the source does not hold stays as it runs).
+  static PlaneSweepConfig fromParams(const ParamSource& p, PlaneSweepConfig base);
 };
 
 // One image to match, with its camera and pose relative to the reference.

@@ -31,9 +31,12 @@ struct DepthMaskConfig {
 
   /// Throws std::invalid_argument naming the field and the bad value.
   void validate() const;
-  /// The defaults above overlaid with the parameters of the same names in `p`
-  /// (colour_range: a list of two numbers); validated.
-  static DepthMaskConfig fromParams(const ParamSource& p);
+  /// `base` overlaid with the parameters of the same names in `p`
+  /// (colour_range: a list of two numbers); validated. The run-time subset
+  /// (margin_px, wait_for_detections, max_pending, time_reset_threshold) is
+  /// cfg/DepthMask.cfg's, read through this same function.
+  static DepthMaskConfig fromParams(const ParamSource& p, DepthMaskConfig base);
+  static DepthMaskConfig fromParams(const ParamSource& p) { return fromParams(p, DepthMaskConfig()); }
 };
 
 /// Sets depth to NaN inside every box grown by `margin_px` on each side, and returns
@@ -54,10 +57,14 @@ class StampPairer {
     std::uint64_t stamp;
     Depth depth;
     std::optional<Dets> dets;  ///< empty when released after the wait
+    /// Released unpaired before its wait ended, because max_pending maps waited.
+    bool queue_full = false;
   };
   explicit StampPairer(double wait_s, std::size_t max_pending = 64) : wait_s_(wait_s), max_pending_(max_pending) {}
 
   void setWait(double wait_s) { wait_s_ = wait_s; }
+  /// Takes effect at the next add (the excess is then released / dropped).
+  void setMaxPending(std::size_t max_pending) { max_pending_ = max_pending; }
 
   std::vector<Pair> addDepth(std::uint64_t stamp, Depth depth, double now_s) {
     std::vector<Pair> out;
@@ -68,7 +75,7 @@ class StampPairer {
     } else {
       depth_.push_back({stamp, now_s, std::move(depth)});
       while (depth_.size() > max_pending_) {  // never hold more than max_pending maps
-        out.push_back({depth_.front().stamp, std::move(depth_.front().depth), std::nullopt});
+        out.push_back({depth_.front().stamp, std::move(depth_.front().depth), std::nullopt, true});
         depth_.pop_front();
         ++timed_out_;
       }
@@ -92,7 +99,10 @@ class StampPairer {
       ++late_;  // its depth already went out without it
     } else {
       dets_[stamp] = std::move(dets);
-      while (dets_.size() > max_pending_) dets_.erase(dets_.begin());  // oldest stamp first
+      while (dets_.size() > max_pending_) {  // oldest stamp first
+        dets_.erase(dets_.begin());
+        ++dets_dropped_;
+      }
     }
     return poll(now_s);
   }
@@ -114,6 +124,8 @@ class StampPairer {
   std::size_t pendingDetections() const { return dets_.size(); }
   std::uint64_t timedOut() const { return timed_out_; }  ///< depth maps released without detections
   std::uint64_t late() const { return late_; }           ///< detections that came after their depth left
+  /// Detection sets dropped unpaired because max_pending sets waited.
+  std::uint64_t detectionsDropped() const { return dets_dropped_; }
 
  private:
   struct Waiting {
@@ -126,7 +138,7 @@ class StampPairer {
   std::deque<Waiting> depth_;
   std::map<std::uint64_t, Dets> dets_;
   std::map<std::uint64_t, bool> released_;
-  std::uint64_t timed_out_ = 0, late_ = 0;
+  std::uint64_t timed_out_ = 0, late_ = 0, dets_dropped_ = 0;
 };
 
 }  // namespace fisheye_mapping

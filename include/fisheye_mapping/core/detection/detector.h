@@ -150,9 +150,13 @@ struct DetectorStageConfig {
 
   /// Throws std::invalid_argument naming the field and the bad value.
   void validate() const;
-  /// The defaults above overlaid with the parameters of the same names in `p`
-  /// (dnn_backend / dnn_target as their names, parsed here); validated.
-  static DetectorStageConfig fromParams(const ParamSource& p);
+  /// `base` overlaid with the parameters of the same names in `p`
+  /// (dnn_backend / dnn_target as their names, parsed here); validated. The
+  /// run-time subset (score_threshold, nms_threshold, only_moving,
+  /// publish_annotated: no model reload) is cfg/Detector.cfg's, read through
+  /// this same function.
+  static DetectorStageConfig fromParams(const ParamSource& p, DetectorStageConfig base);
+  static DetectorStageConfig fromParams(const ParamSource& p) { return fromParams(p, DetectorStageConfig()); }
   /// dnn_backend and dnn_target as the Detector takes them.
   DnnDevice device() const;
   /// The model YAML (loadDetectorConfig) with the thresholds overridden.
@@ -174,6 +178,10 @@ class Detector {
   /// Raw network outputs of the last detect() (for tests and tools).
   const std::vector<cv::Mat>& lastOutputs() const { return outs_; }
   const DetectorConfig& config() const { return cfg_; }
+  /// New score / NMS thresholds for the next detect() (the network stays).
+  /// Throws std::invalid_argument naming the field unless score_threshold is
+  /// in (0, 1) and nms_threshold in (0, 1].
+  void setThresholds(float score_threshold, float nms_threshold);
 
  private:
   DetectorConfig cfg_;

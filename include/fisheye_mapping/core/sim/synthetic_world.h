@@ -1,8 +1,10 @@
 // A procedural driving world with exact ground truth, for synthetic logged
 // drives: a Manhattan grid of streets (urban preset: building blocks with
-// facades, windows, poles, parked cars; forest preset: trees along the road),
-// an ego route with rounded turns, and moving vehicles (oncoming and
-// overtaking) on the ego's road. Rendering casts one ray per pixel through any
+// facades, windows, poles, parked vehicles along the kerbs, some angled;
+// forest preset: trees along the road), an ego route with rounded turns, and
+// moving vehicles (oncoming and overtaking) on the ego's road. Vehicles are
+// cars, vans, trucks and buses with shaped bodies, glass, wheels and lights
+// (vehicle_model.h). Rendering casts one ray per pixel through any
 // camera model: Lambertian shading of world-space textures, so every camera
 // sees the same surface, through a sensor model (by default mild noise and
 // vignetting, identical cameras; optionally per-camera gain / offset / gamma,
@@ -16,6 +18,7 @@
 
 #include <cstdint>
 #include <limits>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -24,23 +27,10 @@
 
 #include "fisheye_mapping/core/camera/camera_model.h"
 #include "fisheye_mapping/core/camera/rig.h"
+#include "fisheye_mapping/core/sim/vehicle_model.h"
 
 namespace fisheye_mapping {
 namespace synth {
-
-enum Material : uint8_t {
-  kSky = 0,
-  kAsphalt,
-  kKerb,
-  kSidewalk,
-  kGrass,
-  kBrick,
-  kPlaster,
-  kFoliage,
-  kBark,
-  kMetal,
-  kCarPaint,
-};
 
 struct WorldConfig {
   std::string preset = "urban";  // "urban" | "forest" | "flat" (ground only, for tests)
@@ -120,7 +110,7 @@ struct Box {
   Eigen::Vector3d lo, hi;  // in the box frame (world for static boxes)
   Material material;
   float albedo;            // base brightness in [0, 1]
-  int object = -1;         // moving-vehicle id, -1 for the static scene
+  int object = -1;         // unused (static scene)
 };
 
 struct Sphere {
@@ -134,7 +124,7 @@ struct MovingVehicle {
   double s0;        // arc length along the route at t = 0
   double speed;     // m/s along the route (negative: driving against it)
   double lateral;   // metres left of the route centreline
-  float albedo;
+  float albedo;     // body paint
 };
 
 struct Hit {
@@ -142,7 +132,7 @@ struct Hit {
   Eigen::Vector3d n = Eigen::Vector3d::UnitZ();
   Material material = kSky;
   float albedo = 0.0f;
-  int object = -1;  // moving-vehicle id or -1
+  int object = -1;  // vehicle id or -1
 };
 
 class World {
@@ -156,6 +146,16 @@ class World {
   Eigen::Isometry3d vehiclePose(int i, double t) const;
   int numVehicles() const { return static_cast<int>(vehicles_.size()); }
 
+  // Every vehicle, moving or parked, has an id: the moving ones 0 ..
+  // numVehicles() - 1 (as vehiclePose), the parked ones after them.
+  int numVehicleIds() const { return static_cast<int>(models_.size()); }
+  bool isMoving(int id) const { return id < numVehicles(); }
+  const VehicleModel& vehicleModel(int id) const { return models_.at(id); }
+  // Pose of vehicle `id` at time t (parked ones: fixed).
+  Eigen::Isometry3d vehiclePoseById(int id, double t) const;
+  // Parks one more vehicle (for scenes built by hand, e.g. in tests); returns its id.
+  int addParkedVehicle(const VehicleDims& dims, const Eigen::Isometry3d& pose);
+
   // First surface along the ray (o, unit d) at time t, up to max_range.
   Hit cast(const Eigen::Vector3d& o, const Eigen::Vector3d& d, double time, double max_range = 250.0) const;
   // The same with the vehicles' poses at the time given (vehiclePoses(time)),
@@ -167,7 +167,8 @@ class World {
   struct Frame {
     cv::Mat image;  // CV_8UC1
     cv::Mat depth;  // CV_32FC1, range along the ray, NaN for sky / invalid pixels
-    cv::Mat ids;    // CV_16SC1, moving-vehicle id per pixel, -1 elsewhere
+    cv::Mat ids;    // CV_16SC1, vehicle id per pixel (moving < numVehicles() <= parked), -1 elsewhere
+    cv::Mat materials;  // CV_8UC1, Material per pixel
   };
   // Renders one camera at pose T_W_C and time t; noise_seed makes the sensor
   // noise deterministic. Uses all cores.
@@ -196,6 +197,11 @@ class World {
   void buildRoute();
   void addStreetSide(const Eigen::Vector2d& a, const Eigen::Vector2d& b, const Eigen::Vector2d& left, uint64_t key);
   void indexGrid();
+  void addParkedRow(const Eigen::Vector2d& a, const Eigen::Vector2d& dir, const Eigen::Vector2d& left, double len,
+                    std::mt19937& rng);
+  bool castVehicle(int id, const Eigen::Isometry3d& T_W_V, const Eigen::Vector3d& o, const Eigen::Vector3d& d,
+                   Hit* best) const;
+  float groundShadow(const Eigen::Vector3d& p, const std::vector<Eigen::Isometry3d>& vehicles) const;
   Eigen::Vector3d routePoint(double s, Eigen::Vector2d* tangent) const;
   float shade(const Hit& h, const Eigen::Vector3d& p) const;
 
@@ -205,7 +211,10 @@ class World {
   std::vector<Box> boxes_;
   std::vector<Sphere> spheres_;
   std::vector<MovingVehicle> vehicles_;
-  // Uniform grid over x-y: each cell lists static boxes (>= 0) and spheres (~index).
+  std::vector<VehicleModel> models_;             // by vehicle id
+  std::vector<Eigen::Isometry3d> parked_poses_;  // id numVehicles() + j
+  // Uniform grid over x-y: each cell lists static boxes (0 .. boxes - 1),
+  // parked vehicles (boxes + j) and spheres (~index).
   double cell_ = 8.0;
   Eigen::Vector2d grid_min_;
   int grid_w_ = 0, grid_h_ = 0;

@@ -53,9 +53,12 @@ struct TsdfConfig {
   // Throws std::invalid_argument naming the field.
   void validate() const;
 
-  // The parameter names of config/tsdf_fusion.yaml over the defaults above;
-  // validated (std::invalid_argument naming the field or parameter).
-  static TsdfConfig fromParams(const ParamSource& p);
+  // The parameter names of config/tsdf_fusion.yaml over `base` (the
+  // defaults above when not given); validated (std::invalid_argument naming
+  // the field or parameter). Over a running config, a source holding only some
+  // names (a dynamic_reconfigure update) changes just those.
+  static TsdfConfig fromParams(const ParamSource& p, TsdfConfig base);
+  static TsdfConfig fromParams(const ParamSource& p) { return fromParams(p, TsdfConfig()); }
 };
 
 }  // namespace fisheye_mapping

@@ -1,8 +1,10 @@
 // TSDF map files: the blocks of a BlockStore (both the active and the swapped
 // ones) to a binary file and back, bit-identical. Layout in tsdf_io.cpp.
-// Version 2 (written now) carries max_weight, a CRC32 of the header and one
-// per block; version 1 (no checksums) is still read. Depends on the store
-// only (no integrator, no camera).
+// Version 3 (written now) stores per block only the voxels that hold
+// something (weight > 0), zlib-compressed, with max_weight, a CRC32 of the
+// header and one per block; version 2 (every voxel, the same checksums) is
+// read, and written on request; version 1 (no checksums) is still read.
+// Depends on the store only (no integrator, no camera).
 //
 // Thread-safety: the functions taking a store need exclusive access to it;
 // readMapFileHeader is thread-safe.
@@ -30,9 +32,12 @@ struct MapSaveOptions {
   // Refuse (throw, nothing written) to replace a file holding blocks (or one
   // that is not a readable map) by a map with no blocks.
   bool refuse_empty_overwrite = false;
+  // 3: compact and compressed (the default); 2: every voxel of every block,
+  // for readers older than version 3. Others: refused (std::runtime_error).
+  uint32_t format_version = 3;
 };
 
-// Writes every block of `store` (format version 2, with the store config's
+// Writes every block of `store` (options.format_version, with the store config's
 // voxel size, truncation and max_weight): <path>.tmp, synced, renamed over
 // path. Disk-swapped blocks are read one at a time (not cached); one whose
 // swap file is unreadable is lost (dropped from the store, reported through
@@ -43,7 +48,8 @@ void saveMapFile(BlockStore& store, const std::string& path, const MapSaveOption
 
 // Replaces the store's contents with the file's (BlockStore::replaceAll),
 // only once the whole file is read and valid: header (and its CRC), block
-// count against the file size, each block's CRC, every voxel finite with
+// count against the file size, each block's CRC, (version 3) each block's
+// zlib stream and its voxel mask, every voxel finite with
 // |tsdf| <= 1 and 0 <= weight <= max_weight (the file's; the config's for
 // version 1), block indices within 1e5 m of the origin, no duplicate blocks;
 // the file's voxel size and truncation must equal the store config's. Throws

@@ -22,6 +22,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <stdexcept>
 #include <string>
 #include <utility>
 #include <vector>
@@ -61,6 +62,12 @@ class TsdfMap {
   TsdfMap& operator=(const TsdfMap&) = delete;
 
   const TsdfConfig& config() const { return config_; }
+  // The only setting that may change on a live map (dynamic_reconfigure): it
+  // affects what later frames fuse, not what the map stores.
+  void setMaxRange(double max_range) {
+    if (!(max_range >= 0.0)) throw std::invalid_argument("TsdfConfig.max_range must be >= 0 (0: no limit)");
+    config_.max_range = max_range;
+  }
 
   // Fuses one depth map: CV_32FC1, the camera's resolution, metres of range
   // along each pixel's ray, NaN (or <= 0, or inf) where invalid. T_W_C is the
@@ -116,7 +123,8 @@ class TsdfMap {
   size_t numLostBlocks() const { return store_->numLostBlocks(); }
   size_t numSwapWriteFailures() const { return store_->numSwapWriteFailures(); }
 
-  // Whole map (both stores) to a binary file (format version 2) and back,
+  // Whole map (both stores) to a binary file (format version 3, compressed;
+  // MapSaveOptions::format_version 2 writes the older layout) and back,
   // bit-identical: saveMapFile / loadMapFile (tsdf_io.h). save writes
   // <path>.tmp, syncs it and renames it over path; on any failure (path a
   // directory, unwritable, disk full) it throws std::runtime_error naming the

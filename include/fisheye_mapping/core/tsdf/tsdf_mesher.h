@@ -3,10 +3,18 @@
 // min_observations times, kept per block so that only blocks changed since the
 // last update are recomputed (and re-sent by the nodelet).
 //
+// Every vertex lies on an edge of the voxel grid and is computed from that
+// edge alone (its lower end, the two values), so the cubes and blocks sharing
+// an edge produce bit-identical positions: exact position equality welds the
+// triangle soup into an indexed mesh (IndexedMesh, the PLY export).
+//
 // Not thread-safe.
 #ifndef FISHEYE_MAPPING_CORE_TSDF_TSDF_MESHER_H_
 #define FISHEYE_MAPPING_CORE_TSDF_TSDF_MESHER_H_
 
+#include <array>
+#include <cmath>
+#include <cstdint>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -23,6 +31,46 @@ struct BlockOutput {
   std::vector<Eigen::Vector3f> surface_points;
 };
 
+// Per-vertex colour of an exported mesh.
+enum class MeshColoring {
+  kHeight,  // world z through a blue (low) -> red (high) hue ramp (the voxels carry no intensity)
+  kNone,    // no colour properties
+};
+
+struct MeshExportOptions {
+  MeshColoring coloring = MeshColoring::kHeight;
+  // The z range (world frame, metres) spanned by the height ramp; values
+  // outside are clamped. NaN: the mesh's own lowest and highest vertex.
+  double z_min = NAN, z_max = NAN;
+};
+
+// A welded triangle mesh: shared vertices, unit area-weighted normals (sum of
+// the adjacent faces' normals weighted by their areas, so pointing to the
+// side the faces' counter-clockwise winding faces: out of the surface,
+// towards the observed free space), and colours (empty for kNone).
+struct IndexedMesh {
+  std::vector<Eigen::Vector3f> vertices;
+  std::vector<Eigen::Vector3f> normals;
+  std::vector<std::array<uint8_t, 3>> colors;  // red, green, blue
+  std::vector<std::array<uint32_t, 3>> faces;  // indices into vertices
+};
+
+// Welds a triangle soup (3 vertices per triangle) by exact position (-0 and
+// +0 alike), drops triangles that collapse to a line or a point (a zero-area
+// corner case of marching cubes), then adds normals and colours.
+IndexedMesh weldTriangles(const std::vector<Eigen::Vector3f>& triangles,
+                          const MeshExportOptions& options = MeshExportOptions());
+
+// The height ramp: s in [0, 1] (clamped; NaN as 0) to red, green, blue,
+// hue falling from 240 degrees (blue) at 0 to 0 degrees (red) at 1, full
+// saturation and value.
+std::array<uint8_t, 3> heightColor(double s);
+
+// Writes `mesh` as binary little-endian PLY through PCL: vertex x y z nx ny nz
+// [red green blue] (float, uchar), face vertex_indices (list). Throws
+// std::runtime_error naming the path on failure.
+void saveIndexedMeshPly(const IndexedMesh& mesh, const std::string& path);
+
 class TsdfMesher {
  public:
   explicit TsdfMesher(int min_observations) : min_observations_(min_observations) {}
@@ -38,9 +86,11 @@ class TsdfMesher {
   size_t numTriangles() const;
   pcl::PointCloud<pcl::PointXYZ> surfaceCloud() const;
 
-  // PLY mesh (binary) and PCD cloud (binary) through PCL. Throw
-  // std::runtime_error naming the path on failure.
-  void saveMeshPly(const std::string& path) const;
+  // Every block's triangles welded into one mesh (weldTriangles).
+  IndexedMesh indexedMesh(const MeshExportOptions& options = MeshExportOptions()) const;
+  // PLY mesh (indexedMesh through saveIndexedMeshPly) and PCD cloud (binary)
+  // through PCL. Throw std::runtime_error naming the path on failure.
+  void saveMeshPly(const std::string& path, const MeshExportOptions& options = MeshExportOptions()) const;
   void saveCloudPcd(const std::string& path) const;
 
   void clear() { blocks_.clear(); }

@@ -1,0 +1,97 @@
+// The launch files as a user meets them: every argument a user may set is
+// documented (doc=, listed by `roslaunch --ros-args`), and vehicle.launch
+// stops at once, naming the file, when the bag, camchain or mount is missing
+// (instead of starting idle nodelets). `roslaunch --nodes` evaluates the
+// arguments without starting anything (no master needed).
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <regex>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "tool_run.h"
+
+namespace {
+
+using fisheye_mapping::test::runTool;
+
+const std::string kLaunchDir = std::string(FM_TEST_DIR) + "/../launch";
+const std::string kRig = std::string(FM_CONFIG_DIR) + "/rig";
+
+std::string readFile(const std::string& path) {
+  std::ifstream f(path);
+  std::stringstream s;
+  s << f.rdbuf();
+  return s.str();
+}
+
+// `roslaunch --nodes` on vehicle.launch with the given arguments.
+fisheye_mapping::test::ToolRun nodes(const std::string& args) {
+  return runTool("roslaunch --nodes " + kLaunchDir + "/vehicle.launch " + args);
+}
+
+TEST(LaunchFiles, EveryUserArgumentHasADoc) {
+  const std::regex arg_tag(R"re(<arg\s[^>]*>)re");
+  const std::regex name_attr(R"re(name="([^"]+)")re");
+  for (const char* file : {"vehicle.launch", "plane_sweep_depth.launch", "tsdf_fusion.launch", "dynamic_objects.launch"}) {
+    const std::string text = readFile(kLaunchDir + "/" + file);
+    ASSERT_FALSE(text.empty()) << file;
+    int user_args = 0;
+    for (std::sregex_iterator it(text.begin(), text.end(), arg_tag), end; it != end; ++it) {
+      const std::string tag = it->str();
+      std::smatch name;
+      ASSERT_TRUE(std::regex_search(tag, name, name_attr)) << file << ": " << tag;
+      // value= args are computed inside the file (checks, derived names), not set by a user.
+      if (tag.find(" value=") != std::string::npos || tag.find("\n       value=") != std::string::npos) continue;
+      ++user_args;
+      EXPECT_NE(tag.find("doc=\""), std::string::npos) << file << ": argument '" << name[1] << "' has no doc=";
+    }
+    EXPECT_GT(user_args, 3) << file;
+  }
+}
+
+TEST(LaunchFiles, VehicleLaunchStopsOnAMissingBagOrCalibration) {
+  const std::string rig = " camchain:=" + kRig + "/default_camchain.yaml mount:=" + kRig + "/default_mount.yaml";
+  // The good case first: the arguments evaluate and the nodes are listed.
+  auto r = nodes("bag:=none rviz:=false" + rig);
+  ASSERT_EQ(r.status, 0) << r.out;
+  EXPECT_NE(r.out.find("/fisheye_mapping/plane_sweep"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("/fisheye_mapping/tsdf"), std::string::npos) << r.out;
+
+  r = nodes("bag:=/nonexistent/drive.bag rviz:=false" + rig);
+  EXPECT_NE(r.status, 0) << r.out;
+  EXPECT_NE(r.out.find("No such file or directory: '/nonexistent/drive.bag'"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("the_bag_file_must_exist"), std::string::npos) << r.out;
+
+  r = nodes("bag:=none rviz:=false camchain:=/nonexistent/camchain.yaml mount:=" + kRig + "/default_mount.yaml");
+  EXPECT_NE(r.status, 0) << r.out;
+  EXPECT_NE(r.out.find("/nonexistent/camchain.yaml"), std::string::npos) << r.out;
+
+  r = nodes("bag:=none rviz:=false camchain:=" + kRig + "/default_camchain.yaml mount:=/nonexistent/mount.yaml");
+  EXPECT_NE(r.status, 0) << r.out;
+  EXPECT_NE(r.out.find("/nonexistent/mount.yaml"), std::string::npos) << r.out;
+
+  r = nodes("bag:=none rviz:=false detector:=yolo" + rig);
+  EXPECT_NE(r.status, 0) << r.out;
+  EXPECT_NE(r.out.find("choose_nanodet_darknet_or_ground_truth"), std::string::npos) << r.out;
+}
+
+TEST(LaunchFiles, NamespaceAndFramesReachTheStagesAndRviz) {
+  const std::string rig = " camchain:=" + kRig + "/default_camchain.yaml mount:=" + kRig + "/default_mount.yaml";
+  // --args prints a node's command line: rviz (outside the stages' namespace)
+  // gets the fixed frame, which follows world_frame.
+  auto r = runTool("roslaunch --args /rviz " + kLaunchDir + "/vehicle.launch bag:=none ns:=fisheye world_frame:=odom" + rig);
+  ASSERT_EQ(r.status, 0) << r.out;
+  EXPECT_NE(r.out.find("-f odom"), std::string::npos) << r.out;
+  r = runTool("roslaunch --dump-params " + kLaunchDir + "/vehicle.launch bag:=none ns:=fisheye world_frame:=odom" + rig);
+  ASSERT_EQ(r.status, 0) << r.out;
+  EXPECT_NE(r.out.find("/fisheye/tsdf/world_frame: odom"), std::string::npos) << r.out;
+  r = nodes("bag:=none rviz:=false ns:=fisheye" + rig);
+  ASSERT_EQ(r.status, 0) << r.out;
+  EXPECT_NE(r.out.find("/fisheye/tsdf"), std::string::npos) << r.out;
+  EXPECT_EQ(r.out.find("/fisheye_mapping/"), std::string::npos) << r.out;
+}
+
+}  // namespace
