@@ -73,6 +73,11 @@ TEST(LaunchFiles, VehicleLaunchStopsOnAMissingBagOrCalibration) {
   EXPECT_NE(r.status, 0) << r.out;
   EXPECT_NE(r.out.find("/nonexistent/mount.yaml"), std::string::npos) << r.out;
 
+  // The rig from camera_info topics: no calibration files needed.
+  r = nodes("bag:=none rviz:=false rig_source:=camera_info camchain:=/nonexistent/c.yaml mount:=/nonexistent/m.yaml");
+  EXPECT_EQ(r.status, 0) << r.out;
+  EXPECT_NE(r.out.find("/fisheye_mapping/sync"), std::string::npos) << r.out;
+
   r = nodes("bag:=none rviz:=false detector:=yolo" + rig);
   EXPECT_NE(r.status, 0) << r.out;
   EXPECT_NE(r.out.find("choose_nanodet_darknet_or_ground_truth"), std::string::npos) << r.out;

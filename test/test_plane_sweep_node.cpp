@@ -2,15 +2,26 @@
 // turns rendered frame sets into depth with the reference image's header that
 // matches the rendered truth, and skips bad frame sets without going down;
 // depth/camera_info is the camchain's reference camera and depth/image_z is
-// range * the z of each pixel's unit ray.
+// range * the z of each pixel's unit ray; with ~rig_source camera_info the
+// rig comes from the sets' CameraInfos and tf, and the depth is the same.
 #include <cv_bridge/cv_bridge.h>
 #include <dynamic_reconfigure/Reconfigure.h>
 #include <gtest/gtest.h>
+#include <algorithm>
+#include <map>
+#include <mutex>
 #include <ros/package.h>
 #include <ros/ros.h>
+#include <diagnostic_msgs/DiagnosticArray.h>
 #include <sensor_msgs/image_encodings.h>
+#include <tf2_eigen/tf2_eigen.h>
+#include <tf2_ros/static_transform_broadcaster.h>
+#include <tf2_ros/transform_broadcaster.h>
+#include <pcl_conversions/pcl_conversions.h>
+#include <sensor_msgs/PointCloud2.h>
 
 #include "fisheye_mapping/CameraFrameSet.h"
+#include "fisheye_mapping/FrameDone.h"
 #include "fisheye_mapping/core/depth/depth_image.h"
 #include "fisheye_mapping/core/eval/depth_error.h"
 #include "fisheye_mapping/core/camera/rig.h"
@@ -23,13 +34,13 @@ namespace {
 
 using fisheye_mapping::test::waitFor;
 
-
-}  // namespace
-
-TEST(PlaneSweepDepthNode, LazyDepthWithTheReferenceHeaderMatchingTruth) {
-  ros::NodeHandle nh;
+fm::Rig smallRig() {
   const std::string dir = ros::package::getPath("fisheye_mapping") + "/test/data/";
-  const fm::Rig rig = fm::loadKalibrRig(dir + "small_rig_camchain.yaml", dir + "small_rig_mount.yaml");
+  return fm::loadKalibrRig(dir + "small_rig_camchain.yaml", dir + "small_rig_mount.yaml");
+}
+
+// A rendered frame set of the small rig (no camera_infos) and cam0's true range.
+fisheye_mapping::CameraFrameSet renderedSet(const fm::Rig& rig, cv::Mat* truth) {
   fm::synth::WorldConfig wc;
   wc.seed = 2;
   wc.route_length = 120;
@@ -38,17 +49,52 @@ TEST(PlaneSweepDepthNode, LazyDepthWithTheReferenceHeaderMatchingTruth) {
   fisheye_mapping::CameraFrameSet set;
   set.header.stamp = ros::Time(1700000003, 250000000);
   set.header.frame_id = rig.cameras[0].frame_id;
-  cv::Mat truth;
   for (size_t c = 0; c < rig.cameras.size(); ++c) {
     const auto& cam = rig.cameras[c];
     auto frame = world.render(cam.model, fm::pixelRays(cam.model), world.egoPose(t) * cam.T_base_cam, t, 100 + c);
-    if (c == 0) truth = frame.depth;
+    if (c == 0) *truth = frame.depth;
     std_msgs::Header h;
     h.stamp = set.header.stamp;
     h.frame_id = cam.frame_id;
     set.camera_names.push_back(cam.name);
     set.images.push_back(*cv_bridge::CvImage(h, "mono8", frame.image).toImageMsg());
   }
+  return set;
+}
+
+// The CameraInfo of each small-rig camera, written out from
+// test/data/small_rig_camchain.yaml (all three alike): omni, D = [xi, k1, k2,
+// p1, p2], K from [xi, fx, fy, cx, cy], 256 x 136.
+sensor_msgs::CameraInfo smallRigInfo(const std_msgs::Header& header) {
+  sensor_msgs::CameraInfo info;
+  info.header = header;
+  info.width = 256;
+  info.height = 136;
+  info.distortion_model = "omni";
+  info.D = {0.98, -0.02, 0.004, 0.0002, -0.0001};
+  info.K = {130.0, 0.0, 127.5, 0.0, 130.0, 67.5, 0.0, 0.0, 1.0};
+  info.R = {1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0};
+  info.P = {130.0, 0.0, 127.5, 0.0, 0.0, 130.0, 67.5, 0.0, 0.0, 0.0, 1.0, 0.0};
+  return info;
+}
+
+void setMaxRatio(const std::string& node, double value) {
+  dynamic_reconfigure::Reconfigure srv;
+  dynamic_reconfigure::DoubleParameter ratio;
+  ratio.name = "max_ratio";
+  ratio.value = value;
+  srv.request.config.doubles.push_back(ratio);
+  ASSERT_TRUE(ros::service::waitForService(node + "/set_parameters", ros::Duration(10.0)));
+  ASSERT_TRUE(ros::service::call(node + "/set_parameters", srv));
+}
+
+}  // namespace
+
+TEST(PlaneSweepDepthNode, LazyDepthWithTheReferenceHeaderMatchingTruth) {
+  ros::NodeHandle nh;
+  const fm::Rig rig = smallRig();
+  cv::Mat truth;
+  const fisheye_mapping::CameraFrameSet set = renderedSet(rig, &truth);
 
   ros::Publisher pub = nh.advertise<fisheye_mapping::CameraFrameSet>("frames", 5);
   // Lazy: nobody listens to depth yet, so the nodelet has not subscribed.
@@ -125,13 +171,7 @@ TEST(PlaneSweepDepthNode, LazyDepthWithTheReferenceHeaderMatchingTruth) {
     }
   }
   // dynamic_reconfigure: a stricter uniqueness ratio keeps fewer pixels.
-  dynamic_reconfigure::Reconfigure srv;
-  dynamic_reconfigure::DoubleParameter ratio;
-  ratio.name = "max_ratio";
-  ratio.value = 0.5;
-  srv.request.config.doubles.push_back(ratio);
-  ASSERT_TRUE(ros::service::waitForService("plane_sweep/set_parameters", ros::Duration(10.0)));
-  ASSERT_TRUE(ros::service::call("plane_sweep/set_parameters", srv));
+  setMaxRatio("plane_sweep", 0.5);
   const int before = cv::countNonZero(d == d);  // d: the first depth's (its message held by `first`)
   fisheye_mapping::CameraFrameSet strict = set;
   strict.header.stamp += ros::Duration(1.0);
@@ -140,6 +180,246 @@ TEST(PlaneSweepDepthNode, LazyDepthWithTheReferenceHeaderMatchingTruth) {
   ASSERT_TRUE(waitFor([&] { return depth->header.stamp == strict.header.stamp; }, 60.0)) << "no depth after reconfigure";
   const int after = cv::countNonZero(cv_bridge::toCvShare(depth)->image == cv_bridge::toCvShare(depth)->image);
   EXPECT_LT(after, before * 0.9) << "max_ratio 0.5 kept " << after << " of " << before << " pixels";
+}
+
+// ~rig_source camera_info (the "ci" node): frame sets before tf knows the
+// camera frames are dropped as "no rig yet"; then the rig comes from the
+// sets' CameraInfos and /tf_static, and the depth equals the camchain node's
+// on the same set, pixel for pixel.
+TEST(PlaneSweepDepthNode, RigFromCameraInfoGivesTheCamchainDepth) {
+  ros::NodeHandle nh;
+  const fm::Rig rig = smallRig();
+  cv::Mat truth;
+  fisheye_mapping::CameraFrameSet set = renderedSet(rig, &truth);
+  set.header.stamp += ros::Duration(5.0);
+  for (auto& img : set.images) img.header.stamp = set.header.stamp;
+  fisheye_mapping::CameraFrameSet ci_set = set;
+  for (const auto& img : set.images) ci_set.camera_infos.push_back(smallRigInfo(img.header));
+  // Both nodes with the same filters (the first test made /plane_sweep's stricter).
+  // The config's value (0.9) on both; reconfigured on the ci node before its
+  // stage exists, so its stage must be built with it.
+  setMaxRatio("plane_sweep", 0.9);
+  setMaxRatio("ci/plane_sweep", 0.9);
+
+  std::mutex m;
+  std::map<std::string, std::string> diag;  // the ci node's depth status
+  auto diag_sub = nh.subscribe<diagnostic_msgs::DiagnosticArray>(
+      "/diagnostics", 20, [&](const diagnostic_msgs::DiagnosticArrayConstPtr& a) {
+        std::lock_guard<std::mutex> lock(m);
+        for (const auto& st : a->status) {
+          if (st.name.find("ci/plane_sweep") == std::string::npos) continue;
+          for (const auto& kv : st.values) diag[kv.key] = kv.value;
+        }
+      });
+  auto diagValue = [&](const std::string& key) {
+    std::lock_guard<std::mutex> lock(m);
+    return diag.count(key) ? diag[key] : std::string();
+  };
+  sensor_msgs::ImageConstPtr depth, ci_depth;
+  sensor_msgs::CameraInfoConstPtr ci_info;
+  auto sub_d = nh.subscribe<sensor_msgs::Image>("depth/image", 5, [&](const sensor_msgs::ImageConstPtr& d) {
+    std::lock_guard<std::mutex> lock(m);
+    depth = d;
+  });
+  auto sub_ci = nh.subscribe<sensor_msgs::Image>("ci/depth/image", 5, [&](const sensor_msgs::ImageConstPtr& d) {
+    std::lock_guard<std::mutex> lock(m);
+    ci_depth = d;
+  });
+  auto sub_info = nh.subscribe<sensor_msgs::CameraInfo>("ci/depth/camera_info", 5,
+                                                        [&](const sensor_msgs::CameraInfoConstPtr& i) { ci_info = i; });
+  ros::Publisher pub = nh.advertise<fisheye_mapping::CameraFrameSet>("frames", 5);
+  ros::Publisher ci_pub = nh.advertise<fisheye_mapping::CameraFrameSet>("ci/frames", 5);
+  ASSERT_TRUE(waitFor([&] { return pub.getNumSubscribers() == 1 && ci_pub.getNumSubscribers() == 1; }, 20.0));
+
+  // No tf yet: dropped, counted and no depth.
+  ci_pub.publish(ci_set);
+  ASSERT_TRUE(waitFor([&] { return !diagValue("dropped: no rig yet").empty(); }, 10.0))
+      << "inputs '" << diagValue("inputs") << "'";
+  EXPECT_NE(diagValue("dropped: no rig yet").find(", 1 total"), std::string::npos) << diagValue("dropped: no rig yet");
+  EXPECT_NE(diagValue("last tf failure").find("no transform from 'cam0_optical_frame' to 'base_link'"),
+            std::string::npos)
+      << diagValue("last tf failure");
+  EXPECT_FALSE(ci_depth);
+
+  // The mount on /tf_static, as robot_state_publisher or the rig tf publisher gives it.
+  tf2_ros::StaticTransformBroadcaster static_tf;
+  std::vector<geometry_msgs::TransformStamped> mount;
+  for (const auto& cam : rig.cameras) {
+    geometry_msgs::TransformStamped t = tf2::eigenToTransform(cam.T_base_cam);
+    t.header.stamp = set.header.stamp;
+    t.header.frame_id = "base_link";
+    t.child_frame_id = cam.frame_id;
+    mount.push_back(t);
+  }
+  static_tf.sendTransform(mount);
+  ros::WallDuration(0.5).sleep();
+  pub.publish(set);
+  ci_pub.publish(ci_set);
+  ASSERT_TRUE(waitFor([&] {
+    std::lock_guard<std::mutex> lock(m);
+    return depth && ci_depth && depth->header.stamp == set.header.stamp && ci_depth->header.stamp == set.header.stamp;
+  }, 90.0)) << "no depth from both nodes";
+  EXPECT_EQ(ci_depth->header.frame_id, rig.cameras[0].frame_id);
+  const cv::Mat a = cv_bridge::toCvShare(depth)->image, b = cv_bridge::toCvShare(ci_depth)->image;
+  ASSERT_EQ(a.size(), b.size());
+  int valid = 0, mismatched = 0;
+  for (int v = 0; v < a.rows; ++v) {
+    for (int u = 0; u < a.cols; ++u) {
+      const float x = a.at<float>(v, u), y = b.at<float>(v, u);
+      if (std::isfinite(x) != std::isfinite(y)) {
+        ++mismatched;
+        continue;
+      }
+      if (!std::isfinite(x)) continue;
+      ++valid;
+      ASSERT_NEAR(x, y, 1e-4) << u << "," << v;
+    }
+  }
+  EXPECT_GT(valid, 1000);
+  EXPECT_EQ(mismatched, 0) << "pixels valid in one depth image only";
+  // Its depth/camera_info is the reference camera's CameraInfo it was given.
+  ASSERT_TRUE(waitFor([&] { return ci_info && ci_info->header.stamp == set.header.stamp; }, 5.0));
+  EXPECT_EQ(ci_info->D, ci_set.camera_infos[0].D);
+  EXPECT_EQ(ci_info->K, ci_set.camera_infos[0].K);
+  EXPECT_EQ(ci_info->distortion_model, "omni");
+}
+
+// No camchain anywhere (the "e2e" group): the sync builds the rig from the
+// cameras' CameraInfos and /tf_static and sends them in each frame set, the
+// depth stage builds its own from those, and the TSDF takes the model from
+// depth/camera_info. The depth equals the camchain node's on the same images,
+// and the map's surface points lie at the measured ranges.
+TEST(PlaneSweepDepthNode, CameraInfoChainFromImagesToMap) {
+  ros::NodeHandle nh;
+  const fm::Rig rig = smallRig();
+  cv::Mat truth;
+  const fisheye_mapping::CameraFrameSet set = renderedSet(rig, &truth);
+  setMaxRatio("plane_sweep", 0.9);
+  setMaxRatio("e2e/plane_sweep", 0.9);
+  tf2_ros::StaticTransformBroadcaster static_tf;
+  tf2_ros::TransformBroadcaster tf;
+  std::vector<geometry_msgs::TransformStamped> mount;
+  std::vector<ros::Publisher> image_pubs, info_pubs;
+  for (size_t c = 0; c < rig.cameras.size(); ++c) {
+    const auto& cam = rig.cameras[c];
+    geometry_msgs::TransformStamped t = tf2::eigenToTransform(cam.T_base_cam);
+    t.header.stamp = set.header.stamp;
+    t.header.frame_id = "base_link";
+    t.child_frame_id = cam.frame_id;
+    mount.push_back(t);
+    const std::string ns = "/e2e/" + cam.name;
+    image_pubs.push_back(nh.advertise<sensor_msgs::Image>(ns + "/image_raw", 5));
+    info_pubs.push_back(nh.advertise<sensor_msgs::CameraInfo>(ns + "/camera_info", 1, true));  // latched, as drivers do
+    info_pubs.back().publish(smallRigInfo(set.images[c].header));
+  }
+  static_tf.sendTransform(mount);
+
+  std::mutex m;
+  sensor_msgs::ImageConstPtr depth, e2e_depth;
+  sensor_msgs::PointCloud2ConstPtr cloud;
+  int fused = 0;
+  auto sub_d = nh.subscribe<sensor_msgs::Image>("depth/image", 5, [&](const sensor_msgs::ImageConstPtr& d) {
+    std::lock_guard<std::mutex> lock(m);
+    depth = d;
+  });
+  auto sub_e = nh.subscribe<sensor_msgs::Image>("e2e/depth/image", 5, [&](const sensor_msgs::ImageConstPtr& d) {
+    std::lock_guard<std::mutex> lock(m);
+    if (!e2e_depth) e2e_depth = d;
+  });
+  auto sub_c = nh.subscribe<sensor_msgs::PointCloud2>("e2e/tsdf/cloud", 2, [&](const sensor_msgs::PointCloud2ConstPtr& c) {
+    std::lock_guard<std::mutex> lock(m);
+    cloud = c;
+  });
+  auto sub_f = nh.subscribe<fisheye_mapping::FrameDone>("e2e/tsdf/fusion_done", 20,
+                                                        [&](const fisheye_mapping::FrameDoneConstPtr& d) {
+                                                          std::lock_guard<std::mutex> lock(m);
+                                                          fused += d->fused;
+                                                        });
+  ros::Publisher pub = nh.advertise<fisheye_mapping::CameraFrameSet>("frames", 5);
+  ASSERT_TRUE(waitFor([&] { return image_pubs[0].getNumSubscribers() > 0 && pub.getNumSubscribers() > 0; }, 30.0))
+      << "subscribers: " << image_pubs[0].getNumSubscribers() << " of the e2e images (the sync), "
+      << pub.getNumSubscribers() << " of frames (the camchain depth node)";
+
+  // The vehicle standing where the images were rendered (synthetic_world's
+  // ego pose at t = 3 s), frames 0.1 s apart until the map holds surface
+  // points (the sync drops images until its rig is built; min_observations 3).
+  fm::synth::WorldConfig wc;
+  wc.seed = 2;
+  wc.route_length = 120;
+  const Eigen::Isometry3d T_W_B = fm::synth::World(wc).egoPose(3.0);
+  const ros::Time t0 = set.header.stamp + ros::Duration(20.0);
+  bool mapped = false;
+  for (int k = 0; k < 100 && !mapped; ++k) {
+    const ros::Time stamp = t0 + ros::Duration(0.1 * k);
+    geometry_msgs::TransformStamped t = tf2::eigenToTransform(T_W_B);
+    t.header.stamp = stamp;
+    t.header.frame_id = "map";
+    t.child_frame_id = "base_link";
+    tf.sendTransform(t);
+    for (size_t c = 0; c < image_pubs.size(); ++c) {
+      sensor_msgs::Image img = set.images[c];
+      img.header.stamp = stamp;
+      image_pubs[c].publish(img);
+    }
+    mapped = waitFor([&] {
+      std::lock_guard<std::mutex> lock(m);
+      return fused >= 3 && cloud && cloud->width * cloud->height > 1000;
+    }, 1.0);
+  }
+  ASSERT_TRUE(mapped) << "no map from the camera_info chain (" << fused << " frames fused)";
+
+  // Its first depth against the camchain node's on the same images and stamp.
+  sensor_msgs::ImageConstPtr e2e;
+  {
+    std::lock_guard<std::mutex> lock(m);
+    e2e = e2e_depth;
+  }
+  ASSERT_TRUE(e2e);
+  EXPECT_EQ(e2e->header.frame_id, rig.cameras[0].frame_id);
+  fisheye_mapping::CameraFrameSet same = set;
+  same.header.stamp = e2e->header.stamp;
+  for (auto& img : same.images) img.header.stamp = same.header.stamp;
+  pub.publish(same);
+  ASSERT_TRUE(waitFor([&] {
+    std::lock_guard<std::mutex> lock(m);
+    return depth && depth->header.stamp == same.header.stamp;
+  }, 60.0));
+  const cv::Mat a = cv_bridge::toCvShare(depth)->image, b = cv_bridge::toCvShare(e2e)->image;
+  ASSERT_EQ(a.size(), b.size());
+  int valid = 0, mismatched = 0;
+  for (int v = 0; v < a.rows; ++v) {
+    for (int u = 0; u < a.cols; ++u) {
+      const float x = a.at<float>(v, u), y = b.at<float>(v, u);
+      if (std::isfinite(x) != std::isfinite(y)) ++mismatched;
+      if (!std::isfinite(x) || !std::isfinite(y)) continue;
+      ++valid;
+      ASSERT_NEAR(x, y, 1e-4) << u << "," << v;
+    }
+  }
+  EXPECT_GT(valid, 1000);
+  EXPECT_EQ(mismatched, 0);
+
+  // The map: each surface point seen by cam0 lies on the ray of its pixel at
+  // the range the depth stage measured there (the TSDF placed the depth with
+  // the model of depth/camera_info; a wrong model would move the points).
+  std::lock_guard<std::mutex> lock(m);
+  EXPECT_EQ(cloud->header.frame_id, "map");
+  pcl::PointCloud<pcl::PointXYZ> points;
+  pcl::fromROSMsg(*cloud, points);
+  const Eigen::Isometry3d T_C_W = (T_W_B * rig.cameras[0].T_base_cam).inverse();
+  std::vector<double> errors;  // relative: |range of the point - measured range| / measured range
+  for (const auto& p : points) {
+    const Eigen::Vector3d q = T_C_W * Eigen::Vector3d(p.x, p.y, p.z);
+    Eigen::Vector2d px;
+    if (!rig.cameras[0].model.project(q, &px)) continue;
+    const int u = int(std::lround(px.x())), v = int(std::lround(px.y()));
+    if (u < 0 || v < 0 || u >= b.cols || v >= b.rows) continue;
+    const float measured = b.at<float>(v, u);
+    if (std::isfinite(measured)) errors.push_back(std::abs(q.norm() - measured) / measured);
+  }
+  ASSERT_GT(errors.size(), 500u) << "of " << points.size() << " map points";
+  std::nth_element(errors.begin(), errors.begin() + errors.size() / 2, errors.end());
+  EXPECT_LT(errors[errors.size() / 2], 0.02) << "median relative range error of " << errors.size() << " map points";
 }
 
 int main(int argc, char** argv) {

@@ -3,11 +3,14 @@
 // true surfaces; bad frames are skipped and counted in /diagnostics; the
 // mesh stream keeps rviz's rules over the whole run; the services save, load
 // and clear, with relative paths under $ROS_HOME; max_range changes at run
-// time through dynamic_reconfigure.
+// time through dynamic_reconfigure; with ~rig_source camera_info the camera
+// model comes from depth_masked/camera_info and the map is the same.
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdlib>
+#include <tuple>
 #include <filesystem>
 #include <atomic>
 #include <fstream>
@@ -22,6 +25,7 @@
 #include <pcl_conversions/pcl_conversions.h>
 #include <ros/package.h>
 #include <ros/ros.h>
+#include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/PointCloud2.h>
 #include <std_srvs/Trigger.h>
 #include <tf2_eigen/tf2_eigen.h>
@@ -163,7 +167,10 @@ class TsdfFusionNode : public ::testing::Test {
   }
 
   // Publishes the vehicle pose (map -> base_link) and the depth the camera sees.
-  void playFrame(const Eigen::Isometry3d& T_W_C, const ros::Time& stamp, const std::string& encoding = "32FC1") {
+  // ci: also to the ~rig_source camera_info node (its CameraInfo first, the
+  // mask's order); camchain: also to the camchain node.
+  void playFrame(const Eigen::Isometry3d& T_W_C, const ros::Time& stamp, const std::string& encoding = "32FC1",
+                 bool ci = false, bool camchain = true) {
     const fm::RigCamera& cam = rig_.cameras[0];
     const Eigen::Isometry3d T_W_B = T_W_C * cam.T_base_cam.inverse();
     geometry_msgs::TransformStamped t = tf2::eigenToTransform(T_W_B);
@@ -178,11 +185,32 @@ class TsdfFusionNode : public ::testing::Test {
     img.encoding = encoding;
     if (encoding == "16UC1") depth.convertTo(img.image, CV_16UC1, 1000.0);
     else img.image = depth;
-    depth_pub_.publish(img.toImageMsg());
+    if (ci) {
+      ci_info_pub_.publish(cameraInfo(img.header));
+      ci_depth_pub_.publish(img.toImageMsg());
+    }
+    if (camchain) depth_pub_.publish(img.toImageMsg());
+  }
+
+  // small_fisheye_camchain.yaml's cam0 written out as a CameraInfo: omni,
+  // D = [xi, k1, k2, p1, p2], K from [xi, fx, fy, cx, cy], 256 x 136.
+  static sensor_msgs::CameraInfo cameraInfo(const std_msgs::Header& header) {
+    sensor_msgs::CameraInfo info;
+    info.header = header;
+    info.width = 256;
+    info.height = 136;
+    info.distortion_model = "omni";
+    info.D = {0.98, -0.02, 0.004, 0.0002, -0.0001};
+    info.K = {130.0, 0.0, 127.5, 0.0, 130.0, 67.5, 0.0, 0.0, 1.0};
+    info.R = {1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0};
+    info.P = {130.0, 0.0, 127.5, 0.0, 0.0, 130.0, 67.5, 0.0, 0.0, 0.0, 1.0, 0.0};
+    return info;
   }
 
   ros::NodeHandle nh_;
   ros::Publisher depth_pub_;
+  ros::Publisher ci_depth_pub_ = nh_.advertise<sensor_msgs::Image>("ci/depth_masked/image", 50);
+  ros::Publisher ci_info_pub_ = nh_.advertise<sensor_msgs::CameraInfo>("ci/depth_masked/camera_info", 50);
   ros::Subscriber cloud_sub_, mesh_sub_, diag_sub_;
   tf2_ros::TransformBroadcaster tf_;
   fm::Rig rig_;
@@ -385,6 +413,128 @@ TEST_F(TsdfFusionNode, MaxRangeChangesAtRunTime) {
   EXPECT_GT(n_limited, 100u);
   EXPECT_LT(n_limited, n_unlimited);
   EXPECT_TRUE(waitFor([] { return diagValue("max_range (m)") == "3.5"; }, 5.0)) << diagValue("max_range (m)");
+}
+
+
+void setMaxRange(const std::string& node, double value) {
+  dynamic_reconfigure::Reconfigure rc;
+  dynamic_reconfigure::DoubleParameter max_range;
+  max_range.name = "max_range";
+  max_range.value = value;
+  rc.request.config.doubles.push_back(max_range);
+  ASSERT_TRUE(ros::service::waitForService(node + "/set_parameters", ros::Duration(10.0)));
+  ASSERT_TRUE(ros::service::call(node + "/set_parameters", rc));
+}
+
+// ~rig_source camera_info: a depth frame before any CameraInfo of its frame is
+// dropped and counted; then the same orbit fused by both nodes, the camchain
+// one and the one taking the model from depth_masked/camera_info, gives the
+// same cloud, point for point.
+TEST_F(TsdfFusionNode, RigFromCameraInfoGivesTheSameMap) {
+  ros::AsyncSpinner spinner(2);
+  spinner.start();
+  std::mutex m;
+  std::map<std::string, std::string> ci_diag;
+  sensor_msgs::PointCloud2ConstPtr cloud, ci_cloud;
+  int fused = 0, ci_fused = 0;
+  auto diag_sub = nh_.subscribe<diagnostic_msgs::DiagnosticArray>(
+      "/diagnostics", 20, boost::function<void(const diagnostic_msgs::DiagnosticArrayConstPtr&)>([&](const auto& a) {
+        std::lock_guard<std::mutex> lock(m);
+        for (const auto& st : a->status) {
+          if (st.name.find("ci/tsdf") == std::string::npos) continue;
+          for (const auto& kv : st.values) ci_diag[kv.key] = kv.value;
+        }
+      }));
+  auto ciDiag = [&](const std::string& key) {
+    std::lock_guard<std::mutex> lock(m);
+    return ci_diag.count(key) ? ci_diag[key] : std::string();
+  };
+  auto cloud_sub = nh_.subscribe<sensor_msgs::PointCloud2>(
+      "tsdf/cloud", 2, boost::function<void(const sensor_msgs::PointCloud2ConstPtr&)>([&](const auto& c) {
+        std::lock_guard<std::mutex> lock(m);
+        cloud = c;
+      }));
+  auto ci_cloud_sub = nh_.subscribe<sensor_msgs::PointCloud2>(
+      "ci/tsdf/cloud", 2, boost::function<void(const sensor_msgs::PointCloud2ConstPtr&)>([&](const auto& c) {
+        std::lock_guard<std::mutex> lock(m);
+        ci_cloud = c;
+      }));
+  auto done_sub = nh_.subscribe<fisheye_mapping::FrameDone>(
+      "tsdf/fusion_done", 20, boost::function<void(const fisheye_mapping::FrameDoneConstPtr&)>([&](const auto& d) {
+        std::lock_guard<std::mutex> lock(m);
+        fused += d->fused;
+      }));
+  auto ci_done_sub = nh_.subscribe<fisheye_mapping::FrameDone>(
+      "ci/tsdf/fusion_done", 20, boost::function<void(const fisheye_mapping::FrameDoneConstPtr&)>([&](const auto& d) {
+        std::lock_guard<std::mutex> lock(m);
+        ci_fused += d->fused;
+      }));
+  ASSERT_TRUE(waitFor([&] {
+    return ci_depth_pub_.getNumSubscribers() > 0 && ci_info_pub_.getNumSubscribers() > 0 &&
+           done_sub.getNumPublishers() > 0 && ci_done_sub.getNumPublishers() > 0;
+  }, 30.0)) << "the camera_info TSDF node never subscribed";
+  // Both from an empty map with the same settings (the test before limited /tsdf's range).
+  std_srvs::Trigger clear;
+  ASSERT_TRUE(ros::service::call("/tsdf/clear_map", clear));
+  ASSERT_TRUE(ros::service::call("/ci/tsdf/clear_map", clear));
+  setMaxRange("/tsdf", 0.0);
+  setMaxRange("/ci/tsdf", 0.0);
+
+  const ros::Time t0 = ros::Time::now();
+  auto orbit = [](int i) {
+    const double a = 2 * M_PI * i / 8;
+    return fm::analytic::lookAt(Eigen::Vector3d(3 + 4.5 * std::cos(a), 4.5 * std::sin(a), 2.5),
+                                Eigen::Vector3d(3, 0, 0.3));
+  };
+  // A depth frame before any CameraInfo: to the camera_info node only.
+  {
+    const fm::RigCamera& cam = rig_.cameras[0];
+    geometry_msgs::TransformStamped t = tf2::eigenToTransform(orbit(0) * cam.T_base_cam.inverse());
+    t.header.stamp = t0;
+    t.header.frame_id = "map";
+    t.child_frame_id = "base_link";
+    tf_.sendTransform(t);
+    cv_bridge::CvImage img(std_msgs::Header(), "32FC1", scene().render(cam.model, orbit(0)));
+    img.header.stamp = t0;
+    img.header.frame_id = cam.frame_id;
+    ci_depth_pub_.publish(img.toImageMsg());
+  }
+  ASSERT_TRUE(waitFor([&] { return ciDiag("dropped: no camera_info yet").find(", 1 total") != std::string::npos; }, 10.0))
+      << "'" << ciDiag("dropped: no camera_info yet") << "'";
+  // Then 8 views to both. Depth and CameraInfo are separate topics: the
+  // first CameraInfo goes ahead, as a running mask's have.
+  std_msgs::Header first;
+  first.stamp = t0;
+  first.frame_id = rig_.cameras[0].frame_id;
+  ci_info_pub_.publish(cameraInfo(first));
+  ros::WallDuration(0.5).sleep();
+  for (int i = 1; i <= 8; ++i) {
+    playFrame(orbit(i), t0 + ros::Duration(0.1 * i), "32FC1", true);
+    ros::WallDuration(0.05).sleep();
+  }
+  ASSERT_TRUE(waitFor([&] {
+    std::lock_guard<std::mutex> lock(m);
+    return fused == 8 && ci_fused == 8;
+  }, 30.0)) << fused << " and " << ci_fused << " of 8 frames fused";
+  EXPECT_EQ(ciDiag("rig source"), "camera_info");
+  ros::WallDuration(1.0).sleep();  // the publishes after the last frame
+  std::lock_guard<std::mutex> lock(m);
+  ASSERT_TRUE(cloud && ci_cloud);
+  pcl::PointCloud<pcl::PointXYZ> a, b;
+  pcl::fromROSMsg(*cloud, a);
+  pcl::fromROSMsg(*ci_cloud, b);
+  EXPECT_GT(a.size(), 1000u);
+  ASSERT_EQ(a.size(), b.size());
+  auto less = [](const pcl::PointXYZ& p, const pcl::PointXYZ& q) {
+    return std::tie(p.x, p.y, p.z) < std::tie(q.x, q.y, q.z);
+  };
+  std::sort(a.begin(), a.end(), less);
+  std::sort(b.begin(), b.end(), less);
+  for (size_t i = 0; i < a.size(); ++i) {
+    ASSERT_NEAR(a[i].x, b[i].x, 1e-4) << i;
+    ASSERT_NEAR(a[i].y, b[i].y, 1e-4) << i;
+    ASSERT_NEAR(a[i].z, b[i].z, 1e-4) << i;
+  }
 }
 
 }  // namespace

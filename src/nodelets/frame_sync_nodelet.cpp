@@ -159,24 +159,18 @@ class FrameSyncNodelet : public nodelet::Nodelet {
   void tryBuildRig() {
     std::lock_guard<std::mutex> lock(mutex_);
     if (rig_) return;
-    std::vector<CameraInfoAndPose> cams;
+    std::vector<sensor_msgs::CameraInfo> infos;
     for (const auto& info : infos_) {
       if (!info) return;
-      CameraInfoAndPose c;
-      c.info = *info;
-      try {
-        c.T_base_cam = toIsometry(tf_buffer_->lookupTransform(base_frame_, info->header.frame_id, ros::Time(0)));
-      } catch (const tf2::TransformException& e) {
-        monitor_->tfFailure(e.what());
-        NODELET_WARN_THROTTLE(5.0, "rig from camera_info: no pose of %s in %s yet: %s", info->header.frame_id.c_str(),
-                              base_frame_.c_str(), e.what());
-        return;
-      }
-      cams.push_back(c);
+      infos.push_back(*info);
     }
     try {
-      rig_ = rigFromCameraInfos(cams, base_frame_);
-      NODELET_INFO("rig of %zu cameras built from their CameraInfo and tf (base frame %s)", cams.size(), base_frame_.c_str());
+      rig_ = rigFromCameraInfosAndTf(infos, {}, *tf_buffer_, base_frame_, ros::Time(0), 0.0);
+      NODELET_INFO("rig of %zu cameras built from their CameraInfo and tf (base frame %s)", infos.size(), base_frame_.c_str());
+    } catch (const tf2::TransformException& e) {
+      monitor_->tfFailure(e.what());
+      NODELET_WARN_THROTTLE(5.0, "%s (yet)", e.what());
+      return;
     } catch (const std::exception& e) {
       monitor_->error(std::string("rig from camera_info: ") + e.what());
       NODELET_ERROR_THROTTLE(10.0, "rig from camera_info rejected: %s", e.what());

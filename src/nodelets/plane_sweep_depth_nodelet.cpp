@@ -16,7 +16,13 @@
 //                               no forward component)
 //             depth/cost       (32FC1: best matching cost (1 - ZNCC) / 2, NaN none)
 //             depth/uniqueness (32FC1: best / second-best cost; ~publish_uniqueness)
-// Parameters  ~camchain, ~mount (rig), ~reference_camera (cam0),
+// Parameters  ~rig_source (camchain | camera_info; default camchain),
+//             ~camchain, ~mount (camchain source), ~base_frame (camera_info
+//             source, default base_link): the rig from the frame sets'
+//             camera_infos and each camera frame's pose in it from tf2, built
+//             on the first frame set and again only when the CameraInfos
+//             change; until then sets are dropped ("no rig yet"),
+//             ~reference_camera (cam0; a name of the sets' camera_names),
 //             ~support_cameras (list; default all others), ~self_masks
 //             (dict camera -> mask image path, non-zero = car body),
 //             plane-sweep parameters (see config/plane_sweep_depth.yaml);
@@ -32,6 +38,7 @@
 // the sim clock behind the newest stamp) is logged with both stamps and
 // counted; the stage keeps no other state keyed on time (each frame set is
 // swept on its own, the mailbox holds one set).
+#include <algorithm>
 #include <condition_variable>
 #include <memory>
 #include <mutex>
@@ -42,6 +49,8 @@
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <sensor_msgs/Image.h>
+#include <tf2_ros/buffer.h>
+#include <tf2_ros/transform_listener.h>
 
 #include "fisheye_mapping/CameraFrameSet.h"
 #include "fisheye_mapping/PlaneSweepFiltersConfig.h"
@@ -78,14 +87,20 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
       // The depth stage's parameters are declared once, in the core
       // (DepthStageConfig, PlaneSweepConfig): the offline FrameSetMapper reads
       // the same names into the same stage object.
-      const DepthStageConfig config = DepthStageConfig::fromParams(RosParams(pnh));
-      stage_ = std::make_unique<DepthStage>(loadRigFromParams(pnh), config);
-      // Built once: per pixel, the z of the reference camera's ray.
-      zdepth_ = std::make_unique<ZDepthConverter>(stage_->rig().cameras[stage_->reference()].model);
+      config_ = DepthStageConfig::fromParams(RosParams(pnh));
       monitor_ = std::make_unique<StageMonitor>(nh, pnh, "depth");
-      NODELET_INFO("plane sweep on %s, reference %s, %zu supporting camera(s), %s", stage_->backendName().c_str(),
-                   config.reference_camera.c_str(), stage_->supports().size(),
-                   toString(config.sweep.resolution).c_str());
+      pnh.param<std::string>("rig_source", rig_source_, "camchain");
+      if (rig_source_ == "camchain") {
+        setStage(std::make_unique<DepthStage>(loadRigFromParams(pnh), config_));
+      } else if (rig_source_ == "camera_info") {
+        pnh.param<std::string>("base_frame", base_frame_, "base_link");
+        tf_buffer_ = std::make_unique<tf2_ros::Buffer>();
+        tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_, nh);
+        NODELET_INFO("plane sweep: rig from the frame sets' camera_infos and tf (base frame %s), reference %s",
+                     base_frame_.c_str(), config_.reference_camera.c_str());
+      } else {
+        throw std::invalid_argument("~rig_source: must be 'camchain' or 'camera_info', got '" + rig_source_ + "'");
+      }
     } catch (const std::exception& e) {
       NODELET_FATAL("plane sweep depth not started: %s", e.what());
       return;
@@ -100,6 +115,63 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
     reconfigure_->setCallback([this](PlaneSweepFiltersConfig& c, uint32_t level) { onReconfigure(c, level); });
     worker_ = std::thread([this] { work(); });
     advertise(nh);
+  }
+
+  // The stage in use (mutex_ held, or before the worker starts), with what
+  // depends on its rig: the z-depth rays, the names the diagnostics show.
+  void setStage(std::unique_ptr<DepthStage> stage) {
+    stage_ = std::move(stage);
+    // Built once per rig: per pixel, the z of the reference camera's ray.
+    zdepth_ = std::make_unique<ZDepthConverter>(stage_->rig().cameras[stage_->reference()].model);
+    {
+      std::lock_guard<std::mutex> lock(views_mutex_);
+      backend_ = stage_->backendName();
+      reference_name_ = stage_->rig().cameras[stage_->reference()].name;
+    }
+    NODELET_INFO("plane sweep on %s, reference %s, %zu supporting camera(s), %s", stage_->backendName().c_str(),
+                 reference_name_.c_str(), stage_->supports().size(), toString(config_.sweep.resolution).c_str());
+  }
+
+  // ~rig_source camera_info (mutex_ held): whether a stage for this set's
+  // CameraInfos exists, building it on the first set and when they change.
+  // A set that cannot have one is dropped ("no rig yet"), logged with why.
+  bool rigFor(const CameraFrameSet& set) {
+    if (rig_source_ != "camera_info") return true;
+    if (stage_ && set.camera_names == rig_names_ && set.camera_infos.size() == rig_infos_.size() &&
+        std::equal(rig_infos_.begin(), rig_infos_.end(), set.camera_infos.begin(), sameCalibration)) {
+      return true;
+    }
+    // A set without the reference camera is bad input, not a new rig.
+    if (std::find(set.camera_names.begin(), set.camera_names.end(), config_.reference_camera) == set.camera_names.end()) {
+      throw std::invalid_argument("frame set has no camera named '" + config_.reference_camera +
+                                  "' (~reference_camera) among its camera_names");
+    }
+    stage_.reset();  // the old rig does not describe these images
+    try {
+      if (set.camera_infos.size() != set.camera_names.size()) {
+        throw std::invalid_argument("frame set has " + std::to_string(set.camera_names.size()) + " camera_names but " +
+                                    std::to_string(set.camera_infos.size()) + " camera_infos");
+      }
+      setStage(std::make_unique<DepthStage>(
+          rigFromCameraInfosAndTf(set.camera_infos, set.camera_names, *tf_buffer_, base_frame_, ros::Time(0), 0.2),
+          config_));
+      rig_infos_ = set.camera_infos;
+      rig_names_ = set.camera_names;
+      return true;
+    } catch (const tf2::TransformException& e) {
+      monitor_->tfFailure(e.what());
+      noRig(set, e.what());
+    } catch (const std::exception& e) {
+      monitor_->error(std::string("rig from camera_info: ") + e.what());
+      noRig(set, e.what());
+    }
+    return false;
+  }
+
+  void noRig(const CameraFrameSet& set, const std::string& why) {
+    monitor_->dropped("no rig yet");
+    NODELET_WARN_THROTTLE(5.0, "frame set at %.3f dropped: no rig yet from its camera_infos and tf: %s",
+                          set.header.stamp.toSec(), why.c_str());
   }
 
   void advertise(ros::NodeHandle& nh) {
@@ -124,13 +196,16 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
     std::lock_guard<std::mutex> lock(mutex_);
     try {
       // Over the running sweep: what the .cfg does not hold (min_noise_std, planes, windows) stays.
-      const PlaneSweepConfig next = PlaneSweepConfig::fromParams(ReconfigureParams(values), stage_->sweepConfig());
+      const PlaneSweepConfig next = PlaneSweepConfig::fromParams(ReconfigureParams(values),
+                                                                 stage_ ? stage_->sweepConfig() : config_.sweep);
       if ((level & kSweepLevel) && reconfigured_) {
-        stage_->setSweepConfig(next);
+        if (stage_) stage_->setSweepConfig(next);
+        config_.sweep = next;  // also for a stage built later (~rig_source camera_info)
         NODELET_INFO("sweep rebuilt: near %.2f, far %.1f m, ground %.2f + [%.2f, %.2f] m, min parallax %.3f px",
                      next.near, next.far, next.ground_height, next.ground_min, next.ground_max, next.min_parallax_px);
       } else {
-        stage_->setFilters(next.filters);
+        if (stage_) stage_->setFilters(next.filters);
+        config_.sweep.filters = next.filters;
       }
       reconfigured_ = true;
     } catch (const std::exception& e) {
@@ -171,9 +246,10 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
   }
 
   void report(diagnostic_updater::DiagnosticStatusWrapper& stat) {
-    stat.add("backend", stage_->backendName());
-    stat.add("reference camera", stage_->rig().cameras[stage_->reference()].name);
     std::lock_guard<std::mutex> lock(views_mutex_);
+    stat.add("rig source", rig_source_);
+    stat.add("backend", backend_.empty() ? "none yet (no rig)" : backend_);
+    stat.add("reference camera", reference_name_.empty() ? config_.reference_camera : reference_name_);
     stat.add("supporting views used", used_views_);
   }
 
@@ -206,8 +282,7 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
       std::lock_guard<std::mutex> lock(mutex_);
       const double t0 = StageStats::now();
       try {
-        process(*set, set);
-        monitor_->output();
+        if (process(*set, set)) monitor_->output();
       } catch (const std::exception& e) {
         skip(*set, e.what());
       } catch (...) {
@@ -231,11 +306,13 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
     return nullptr;
   }
 
-  void process(const CameraFrameSet& set, const CameraFrameSetConstPtr& owner) {
+  // False: dropped for want of a rig (counted there).
+  bool process(const CameraFrameSet& set, const CameraFrameSetConstPtr& owner) {
     if (set.camera_names.size() != set.images.size()) {
       throw std::invalid_argument("frame set has " + std::to_string(set.camera_names.size()) + " names but " +
                                   std::to_string(set.images.size()) + " images");
     }
+    if (!rigFor(set)) return false;
     const Rig& rig = stage_->rig();
     const int ref = stage_->reference();
     const sensor_msgs::ImageConstPtr ref_img = imageOf(set, owner, ref);
@@ -259,6 +336,7 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
     if (header.frame_id.empty()) header.frame_id = rig.cameras[ref].frame_id;
     publish(header, r);
     NODELET_DEBUG("depth in %.1f ms (sweep %.1f, filters %.1f)", r.total_ms, r.sweep_ms, r.filter_ms);
+    return true;
   }
 
   void publish(const std_msgs::Header& header, const DepthResult& r) {
@@ -270,7 +348,13 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
     if (publish_uniqueness_) uniqueness_pub_.publish(toImageMsg(header, r.uniqueness));
   }
 
-  std::unique_ptr<DepthStage> stage_;
+  DepthStageConfig config_;  // the start-up parameters, with the sweep as reconfigured (mutex_)
+  std::string rig_source_ = "camchain", base_frame_;
+  std::unique_ptr<DepthStage> stage_;  // camera_info source: null until the first frame set's rig
+  std::vector<sensor_msgs::CameraInfo> rig_infos_;  // camera_info source: the stage's rig was built from these
+  std::vector<std::string> rig_names_;
+  std::unique_ptr<tf2_ros::Buffer> tf_buffer_;
+  std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
   std::unique_ptr<ZDepthConverter> zdepth_;
   bool publish_uniqueness_ = false, reconfigured_ = false;
   std::mutex mutex_, connect_mutex_;  // mutex_: the stage (worker, reconfigure)
@@ -285,7 +369,7 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
   std::unique_ptr<StageMonitor> monitor_;
   ros::WallTimer clock_timer_;
   std::mutex views_mutex_;
-  std::string used_views_;
+  std::string used_views_, backend_, reference_name_;  // views_mutex_
   // The mailbox: the newest frame set not yet swept.
   std::mutex mailbox_mutex_;
   std::condition_variable mailbox_cv_;

@@ -3,6 +3,10 @@
 // Topics are relative to the node's namespace (vehicle.launch: /fisheye_mapping).
 // Subscribes  depth_masked/image (sensor_msgs/Image 32FC1, range along the ray, NaN invalid)
 //             through a tf2 MessageFilter, so a frame waits for its pose.
+//             With ~rig_source camera_info: depth_masked/camera_info, the
+//             camera model of each depth image (the latest CameraInfo of its
+//             frame_id; a frame before one is dropped, "no camera_info yet").
+//             ~rig_source camchain (default): the model from ~camchain/~mount.
 // Publishes   tsdf/mesh  (visualization_msgs/MarkerArray: one TRIANGLE_LIST per map
 //                    block, only blocks changed since the last publish)
 //             tsdf/cloud (sensor_msgs/PointCloud2: surface points, world frame)
@@ -26,6 +30,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <map>
 #include <memory>
 #include <mutex>
 
@@ -46,6 +51,7 @@
 #include "fisheye_mapping/TsdfFusionConfig.h"
 #include "fisheye_mapping/core/tsdf/tsdf_map.h"
 #include "fisheye_mapping/core/tsdf/tsdf_mesher.h"
+#include "fisheye_mapping/ros/camera_info.h"
 #include "fisheye_mapping/ros/conversions.h"
 #include "fisheye_mapping/ros/mesh_markers.h"
 #include "fisheye_mapping/ros/ros_params.h"
@@ -110,7 +116,12 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
       // Relative: against $ROS_HOME, like the services' paths.
       if (!save_on_shutdown.empty()) save_on_shutdown_ = tsdf_node::outputPath(save_on_shutdown);
       cfg = TsdfConfig::fromParams(RosParams(pnh));
-      rig_ = loadRigFromParams(pnh);
+      pnh.param<std::string>("rig_source", rig_source_, "camchain");
+      if (rig_source_ == "camchain") {
+        rig_ = loadRigFromParams(pnh);
+      } else if (rig_source_ != "camera_info") {
+        throw std::invalid_argument("~rig_source: must be 'camchain' or 'camera_info', got '" + rig_source_ + "'");
+      }
       monitor_ = std::make_unique<StageMonitor>(nh, pnh, "tsdf");
       live_ = cfg;
       map_ = std::make_unique<TsdfMap>(cfg);
@@ -135,6 +146,9 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
 
     tf_buffer_ = std::make_unique<tf2_ros::Buffer>(ros::Duration(30.0));
     tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_, nh);
+    if (rig_source_ == "camera_info") {
+      info_sub_ = nh.subscribe("depth_masked/camera_info", 10, &TsdfFusionNodelet::onCameraInfo, this);
+    }
     depth_sub_.subscribe(nh, "depth_masked/image", queue_size);
     depth_sub_.registerCallback([this](const sensor_msgs::ImageConstPtr&) { monitor_->input(); });
     tf_filter_ = std::make_unique<tf2_ros::MessageFilter<sensor_msgs::Image>>(depth_sub_, *tf_buffer_, world_frame_,
@@ -393,6 +407,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     if (lost) stat.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN, "swapped blocks lost");
     if (write_failures) stat.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN, "swap writes failed (blocks kept in RAM)");
     if (saves_failed_) stat.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN, "saves failed");
+    stat.add("rig source", rig_source_);
     stat.add("frames fused", frames_fused_);
     stat.add("exceptions in depth callbacks", static_cast<size_t>(depth_errors_));
     stat.add("exceptions in services", static_cast<size_t>(service_errors_));
@@ -449,13 +464,8 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
 
   void fuse(const sensor_msgs::ImageConstPtr& msg, std::string* skipped_because) {
     std::string& skipped = *skipped_because;
-    const int cam_index = cameraIndex(msg->header.frame_id);
-    if (cam_index < 0) {
-      skipped = "frame '" + msg->header.frame_id + "' is not a camera of the rig";
-      monitor_->dropped("not a rig camera");
-      NODELET_WARN_THROTTLE(5.0, "depth frame '%s' is not a camera of the rig; frame skipped", msg->header.frame_id.c_str());
-      return;
-    }
+    const std::shared_ptr<const CameraModel> model = modelOf(msg->header.frame_id, &skipped);
+    if (!model) return;
     try {
       checkDepthImage(*msg, getNodeHandle().resolveName("depth"));
     } catch (const ImageConversionError& e) {
@@ -504,8 +514,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     std::lock_guard<std::mutex> lock(mutex_);
     try {
       const double t0 = StageStats::now();
-      const auto stats = map_->integrate(depth, rig_.cameras[cam_index].model,
-                                         T_W_C, T_W_B.translation());
+      const auto stats = map_->integrate(depth, *model, T_W_C, T_W_B.translation());
       monitor_->processed(StageStats::now() - t0);
       monitor_->output();  // the stage's product: a frame in the map
       last_stamp_ = msg->header.stamp;
@@ -525,11 +534,45 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     }
   }
 
-  int cameraIndex(const std::string& frame) const {
-    for (size_t i = 0; i < rig_.cameras.size(); ++i) {
-      if (rig_.cameras[i].frame_id == frame) return static_cast<int>(i);
+  // The camera model of depth images in `frame`: the camchain camera of that
+  // frame id, or (~rig_source camera_info) the latest CameraInfo's. Null:
+  // none, the drop counted and *skipped saying why.
+  std::shared_ptr<const CameraModel> modelOf(const std::string& frame, std::string* skipped) {
+    if (rig_source_ == "camera_info") {
+      std::lock_guard<std::mutex> lock(info_mutex_);
+      const auto it = models_.find(frame);
+      if (it != models_.end()) return it->second.model;
+      *skipped = "no camera_info for frame '" + frame + "' yet";
+      monitor_->dropped("no camera_info yet");
+      NODELET_WARN_THROTTLE(5.0, "depth frame '%s' dropped: no CameraInfo of that frame on %s yet", frame.c_str(),
+                            getNodeHandle().resolveName("depth_masked/camera_info").c_str());
+      return nullptr;
     }
-    return -1;
+    for (const auto& cam : rig_.cameras) {
+      if (cam.frame_id == frame) return std::shared_ptr<const CameraModel>(std::shared_ptr<void>(), &cam.model);
+    }
+    *skipped = "frame '" + frame + "' is not a camera of the rig";
+    monitor_->dropped("not a rig camera");
+    NODELET_WARN_THROTTLE(5.0, "depth frame '%s' is not a camera of the rig; frame skipped", frame.c_str());
+    return nullptr;
+  }
+
+  // ~rig_source camera_info: the model of the CameraInfo's frame, parsed
+  // again only when the calibration changes; a bad one is logged and counted,
+  // and that frame's depth is dropped until a good one arrives.
+  void onCameraInfo(const sensor_msgs::CameraInfoConstPtr& msg) {
+    std::lock_guard<std::mutex> lock(info_mutex_);
+    const auto it = models_.find(msg->header.frame_id);
+    if (it != models_.end() && sameCalibration(it->second.info, *msg)) return;
+    try {
+      models_[msg->header.frame_id] = {*msg, std::make_shared<const CameraModel>(fromCameraInfo(*msg))};
+      NODELET_INFO("camera model of frame '%s' from its CameraInfo (%s, %ux%u)", msg->header.frame_id.c_str(),
+                   msg->distortion_model.c_str(), msg->width, msg->height);
+    } catch (const std::exception& e) {
+      models_.erase(msg->header.frame_id);
+      monitor_->error(std::string("camera_info: ") + e.what());
+      NODELET_ERROR_THROTTLE(5.0, "camera_info rejected: %s", e.what());
+    }
   }
 
   // Every publish_period: the mesh blocks that changed, and the cloud.
@@ -634,7 +677,16 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
   }
 
   std::mutex mutex_;
-  Rig rig_;
+  std::string rig_source_ = "camchain";
+  Rig rig_;  // camchain source
+  // camera_info source: frame id -> its latest CameraInfo and camera model.
+  struct InfoModel {
+    sensor_msgs::CameraInfo info;
+    std::shared_ptr<const CameraModel> model;
+  };
+  std::mutex info_mutex_;
+  std::map<std::string, InfoModel> models_;
+  ros::Subscriber info_sub_;
   std::unique_ptr<TsdfMap> map_;
   std::unique_ptr<TsdfMesher> mesher_;
   std::unique_ptr<tf2_ros::Buffer> tf_buffer_;

@@ -6,6 +6,7 @@
 #include <stdexcept>
 
 #include <sensor_msgs/distortion_models.h>
+#include <tf2_eigen/tf2_eigen.h>
 
 namespace fisheye_mapping {
 namespace {
@@ -234,6 +235,36 @@ sensor_msgs::CameraInfo scaledCameraInfo(const CameraModel& cam, double scale, c
                                 std::to_string(cam.width()) + "x" + std::to_string(cam.height()) + " image");
   }
   return toCameraInfo(cam.scaled(scale, width, height), frame_id, stamp);
+}
+
+Rig rigFromCameraInfosAndTf(const std::vector<sensor_msgs::CameraInfo>& infos, const std::vector<std::string>& names,
+                            const tf2_ros::Buffer& tf, const std::string& base_frame, const ros::Time& stamp,
+                            double timeout_s) {
+  if (!names.empty() && names.size() != infos.size()) {
+    throw std::invalid_argument("rig from CameraInfos: " + std::to_string(names.size()) + " camera names for " +
+                                std::to_string(infos.size()) + " CameraInfos");
+  }
+  std::vector<CameraInfoAndPose> cameras(infos.size());
+  for (size_t i = 0; i < infos.size(); ++i) {
+    CameraInfoAndPose& c = cameras[i];
+    c.info = infos[i];
+    if (!names.empty()) c.name = names[i];
+    const std::string& frame = c.info.header.frame_id;
+    try {
+      c.T_base_cam = tf2::transformToEigen(tf.lookupTransform(base_frame, frame, stamp, ros::Duration(timeout_s)));
+    } catch (const tf2::TransformException& e) {
+      throw tf2::TransformException("rig from CameraInfos: " + (c.name.empty() ? "cam" + std::to_string(i) : c.name) +
+                                    ": no transform from '" + frame + "' to '" + base_frame + "': " + e.what());
+    }
+  }
+  return rigFromCameraInfos(cameras, base_frame);
+}
+
+bool sameCalibration(const sensor_msgs::CameraInfo& a, const sensor_msgs::CameraInfo& b) {
+  sensor_msgs::CameraInfo a0 = a, b0 = b;
+  a0.header.stamp = b0.header.stamp = ros::Time();
+  a0.header.seq = b0.header.seq = 0;
+  return a0 == b0;
 }
 
 }  // namespace fisheye_mapping

@@ -33,6 +33,7 @@
 #include <Eigen/Geometry>
 #include <ros/time.h>
 #include <sensor_msgs/CameraInfo.h>
+#include <tf2_ros/buffer.h>
 
 #include "fisheye_mapping/core/camera/camera_model.h"
 #include "fisheye_mapping/core/camera/rig.h"
@@ -85,6 +86,23 @@ Rig rigFromCameraInfos(const std::vector<CameraInfoAndPose>& cameras,
 // an empty image.
 sensor_msgs::CameraInfo scaledCameraInfo(const CameraModel& cam, double scale,
                                          const std::string& frame_id, const ros::Time& stamp);
+
+
+// The rig of these CameraInfos (in order; names[i] the camera's name, an empty
+// list or name: "cam<index>") with each camera's pose looked up in tf2:
+// lookupTransform(base_frame, info.header.frame_id, stamp, timeout_s) -
+// ros::Time(0) for the latest, as for a static mount - then
+// rigFromCameraInfos. Throws tf2::TransformException naming the camera and
+// the missing transform ("rig from CameraInfos: cam1: no transform from
+// 'cam1_optical' to 'base_link': ..."), std::invalid_argument when names and
+// infos differ in length, and rigFromCameraInfos' CalibrationErrors.
+Rig rigFromCameraInfosAndTf(const std::vector<sensor_msgs::CameraInfo>& infos, const std::vector<std::string>& names,
+                            const tf2_ros::Buffer& tf, const std::string& base_frame, const ros::Time& stamp,
+                            double timeout_s);
+
+// Whether two CameraInfos describe the same camera: all but header.stamp and
+// header.seq equal (a rig built from `a` holds for `b`).
+bool sameCalibration(const sensor_msgs::CameraInfo& a, const sensor_msgs::CameraInfo& b);
 
 }  // namespace fisheye_mapping
 
