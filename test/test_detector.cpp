@@ -279,6 +279,20 @@ TEST(DetectorNms, PerClassByHand) {
   EXPECT_EQ(nmsPerClass(c, 0.85f).size(), 4u);
 }
 
+TEST(DetectorNms, AcrossClassesByHand) {
+  // A vehicle scored as two kinds (van 0.6, car 0.9 on the same box) is one detection.
+  std::vector<Candidate> c = {{3, 0.6f, 0, 0, 10, 10},
+                              {2, 0.9f, 1, 0, 11, 10},    // IoU 9/11 with the first: suppresses it
+                              {3, 0.7f, 6, 0, 16, 10}};   // IoU 4/16 with the second: kept
+  const auto k = nmsAcrossClasses(c, 0.5f);
+  ASSERT_EQ(k.size(), 2u);
+  EXPECT_EQ(k[0].class_id, 2);
+  EXPECT_FLOAT_EQ(k[0].score, 0.9f);
+  EXPECT_EQ(k[1].class_id, 3);
+  EXPECT_FLOAT_EQ(k[1].score, 0.7f);
+  EXPECT_EQ(nmsPerClass(c, 0.5f).size(), 3u);  // within classes nothing overlaps enough
+}
+
 TEST(DetectorConfigFile, ErrorsNameFileAndKey) {
   const std::string p = tmpDir() + "/bad.yaml";
   const auto expectError = [&](const std::string& yaml, const std::string& needle) {

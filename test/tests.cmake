@@ -93,4 +93,5 @@ add_dependencies(test_tool_options rig_info refine_rig make_drive depth_eval map
 fm_add_test(test_reconfigure_detection SOURCES test/test_reconfigure_detection.cpp LIBS fisheye_mapping_ros DEPENDS fisheye_mapping_gencfg)
 fm_add_test(test_own_rig_node ROSTEST test/launch/own_rig.test SOURCES test/test_own_rig_node.cpp DEPENDS fisheye_mapping_nodelets make_drive paced_player)
 fm_add_test(test_reconfigure_tsdf SOURCES test/test_reconfigure_tsdf.cpp LIBS fisheye_mapping_ros DEPENDS fisheye_mapping_gencfg)
+fm_add_test(test_detector_eval SOURCES test/test_detector_eval.cpp DEPENDS detector_eval)
 fm_add_test(test_launch_files SOURCES test/test_launch_files.cpp INCLUDES ${PROJECT_SOURCE_DIR}/test)

@@ -147,6 +147,7 @@ DetectorConfig loadDetectorConfig(const std::string& yaml_path) {
     if (c.class_names.empty()) throw fail("class_names", "is empty");
     if (root["score_threshold"]) c.score_threshold = root["score_threshold"].as<float>();
     if (root["nms_threshold"]) c.nms_threshold = root["nms_threshold"].as<float>();
+    if (root["nms_across_classes"]) c.nms_across_classes = root["nms_across_classes"].as<bool>();
     if (!scoreThresholdOk(c.score_threshold))
       throw fail("score_threshold", "must be in (0, 1), got " + number(c.score_threshold));
     if (!nmsThresholdOk(c.nms_threshold)) throw fail("nms_threshold", "must be in (0, 1], got " + number(c.nms_threshold));
@@ -460,24 +461,44 @@ std::vector<Candidate> decodeHead(const std::vector<cv::Mat>& outs, const Detect
   return {};
 }
 
+namespace {
+
+// cv::dnn::NMSBoxes over the candidates `idx`; the survivors appended to `kept`.
+void nmsInto(const std::vector<Candidate>& cands, const std::vector<int>& idx, float iou_threshold,
+             std::vector<Candidate>& kept) {
+  std::vector<cv::Rect2d> boxes;
+  std::vector<float> scores;
+  for (int i : idx) {
+    const auto& c = cands[i];
+    boxes.emplace_back(c.x_min, c.y_min, c.x_max - c.x_min, c.y_max - c.y_min);
+    scores.push_back(c.score);
+  }
+  std::vector<int> keep;
+  cv::dnn::NMSBoxes(boxes, scores, 0.f, iou_threshold, keep);
+  for (int k : keep) kept.push_back(cands[idx[k]]);
+}
+
+std::vector<Candidate> byScore(std::vector<Candidate> kept) {
+  std::sort(kept.begin(), kept.end(), [](const Candidate& a, const Candidate& b) { return a.score > b.score; });
+  return kept;
+}
+
+}  // namespace
+
 std::vector<Candidate> nmsPerClass(const std::vector<Candidate>& cands, float iou_threshold) {
   std::map<int, std::vector<int>> by_class;
   for (int i = 0; i < int(cands.size()); ++i) by_class[cands[i].class_id].push_back(i);
   std::vector<Candidate> kept;
-  for (const auto& [cls, idx] : by_class) {
-    std::vector<cv::Rect2d> boxes;
-    std::vector<float> scores;
-    for (int i : idx) {
-      const auto& c = cands[i];
-      boxes.emplace_back(c.x_min, c.y_min, c.x_max - c.x_min, c.y_max - c.y_min);
-      scores.push_back(c.score);
-    }
-    std::vector<int> keep;
-    cv::dnn::NMSBoxes(boxes, scores, 0.f, iou_threshold, keep);
-    for (int k : keep) kept.push_back(cands[idx[k]]);
-  }
-  std::sort(kept.begin(), kept.end(), [](const Candidate& a, const Candidate& b) { return a.score > b.score; });
-  return kept;
+  for (const auto& [cls, idx] : by_class) nmsInto(cands, idx, iou_threshold, kept);
+  return byScore(std::move(kept));
+}
+
+std::vector<Candidate> nmsAcrossClasses(const std::vector<Candidate>& cands, float iou_threshold) {
+  std::vector<int> all(cands.size());
+  for (int i = 0; i < int(cands.size()); ++i) all[i] = i;
+  std::vector<Candidate> kept;
+  nmsInto(cands, all, iou_threshold, kept);
+  return byScore(std::move(kept));
 }
 
 float boxIoU(const Detection& a, const Detection& b) {
@@ -593,7 +614,9 @@ std::vector<Detection> Detector::detect(const cv::Mat& image, bool only_moving) 
   } catch (const cv::Exception& e) {
     throw std::runtime_error("detector: inference failed on model " + cfg_.model_path + ": " + e.what());
   }
-  const auto kept = nmsPerClass(decodeHead(outs_, cfg_), cfg_.nms_threshold);
+  const auto candidates = decodeHead(outs_, cfg_);
+  const auto kept = cfg_.nms_across_classes ? nmsAcrossClasses(candidates, cfg_.nms_threshold)
+                                            : nmsPerClass(candidates, cfg_.nms_threshold);
   return toDetections(kept, lb, cfg_, image.cols, image.rows, only_moving);
 }
 

@@ -48,6 +48,10 @@ struct DetectorConfig {
   DetectorHead head = DetectorHead::NanoDet;
   float score_threshold = 0.35f;
   float nms_threshold = 0.5f;
+  /// Non-maximum suppression over all classes (one box per object, for a model
+  /// whose classes are kinds of one thing, e.g. car / van / truck / bus: the
+  /// same vehicle scored as two kinds is one detection); false: within a class.
+  bool nms_across_classes = false;
   /// Classes whose boxes are published (and masked): the potentially moving ones.
   std::vector<std::string> moving_classes = {"bicycle", "car", "motorbike", "bus", "train", "truck"};
   /// Input normalisation, in the network's channel order: (pixel - mean) / std, pixel in 0..255.
@@ -104,6 +108,9 @@ std::vector<Candidate> decodeHead(const std::vector<cv::Mat>& outs, const Detect
 
 /// Non-maximum suppression within each class (different classes never suppress each other).
 std::vector<Candidate> nmsPerClass(const std::vector<Candidate>& cands, float iou_threshold);
+/// Non-maximum suppression over all classes: the best-scored box of overlapping
+/// ones stays, with its class.
+std::vector<Candidate> nmsAcrossClasses(const std::vector<Candidate>& cands, float iou_threshold);
 
 /// Intersection over union of two boxes.
 float boxIoU(const Detection& a, const Detection& b);
