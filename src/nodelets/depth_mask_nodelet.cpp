@@ -99,6 +99,10 @@ class DepthMaskNodelet : public nodelet::Nodelet {
     masked_pub_ = it_->advertise("depth_masked/image", 5, connect, connect);
     mask_pub_ = it_->advertise("depth_masked/mask", 5, connect, connect);
     colour_pub_ = it_->advertise("depth_masked/colour", 2, connect, connect);
+    // A subscriber that connected while the publishers above were being
+    // assigned may have run the connect callback too early (it saw none):
+    // look once more now that all of them exist.
+    updateSubscription();
   }
 
   // Polls the pairing often enough that a depth map leaves close to its wait.

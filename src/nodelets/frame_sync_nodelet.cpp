@@ -92,6 +92,10 @@ class FrameSyncNodelet : public nodelet::Nodelet {
     it_ = std::make_unique<image_transport::ImageTransport>(nh);
     auto connect = [this](const ros::SingleSubscriberPublisher&) { updateSubscription(); };
     pub_ = nh.advertise<CameraFrameSet>("frames", 5, connect, connect);
+    // A subscriber that connected while the publishers above were being
+    // assigned may have run the connect callback too early (it saw none):
+    // look once more now that all of them exist.
+    updateSubscription();
     reconfigure_ = std::make_unique<dynamic_reconfigure::Server<FrameSyncReconfigure>>(reconfigure_mutex_, pnh);
     reconfigure_->setCallback([this](FrameSyncReconfigure& c, uint32_t) { onReconfigure(c); });
     clock_timer_ = nh.createWallTimer(ros::WallDuration(0.2), [this](const ros::WallTimerEvent&) { checkClock(); });

@@ -182,6 +182,10 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
     z_pub_ = it_->advertise("depth/image_z", 2, connect, connect);
     cost_pub_ = it_->advertise("depth/cost", 2, connect, connect);
     if (publish_uniqueness_) uniqueness_pub_ = it_->advertise("depth/uniqueness", 2, connect, connect);
+    // A subscriber that connected while the publishers above were being
+    // assigned may have run the connect callback too early (it saw none):
+    // look once more now that all of them exist.
+    updateSubscription();
   }
 
   // The names are the core's (PlaneSweepConfig::fromParams, checked against
