@@ -8,7 +8,9 @@ FM_ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd -P)
 export PATH="/usr/bin:/bin:/usr/sbin:/sbin:${PATH}"
 FM_CACHE=${FISHEYE_MAPPING_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/fisheye_mapping}
 # One workspace per checkout, so two clones never share build outputs.
-FM_WS="$FM_CACHE/ws-$(printf '%s' "$FM_ROOT" | md5sum | cut -c1-10)"
+# FISHEYE_MAPPING_WS: another workspace (scripts/checks/test_train_detector
+# reuses the built one with a temporary cache).
+FM_WS=${FISHEYE_MAPPING_WS:-"$FM_CACHE/ws-$(printf '%s' "$FM_ROOT" | md5sum | cut -c1-10)"}
 export FISHEYE_MAPPING_SHARED_DIR=${FISHEYE_MAPPING_SHARED_DIR:-$(dirname "$FM_ROOT")/shared}
 
 fm_log() { printf '\033[1m[fisheye_mapping]\033[0m %s\n' "$*" >&2; }

@@ -60,7 +60,7 @@ double msSince(Clock::time_point t0) { return std::chrono::duration<double, std:
 
 const char* kUsage =
     "usage: offline_mapper --bag B --camchain F --mount F --out DIR [--config vehicle.yaml]\n"
-    "       [--detector nanodet|darknet|ground_truth|none|MODEL.yaml] [--depth sweep|gt]\n"
+    "       [--detector nanodet|finetuned|darknet|ground_truth|none|MODEL.yaml] [--depth sweep|gt]\n"
     "       [--topic CAM=TOPIC]... [--sync exact|approximate] [--sync-tolerance SECONDS]\n"
     "       [--frames N] [--every K] [--world map] [--config-dir DIR] [--save-depth DIR] [--quiet]\n"
     "  --bag B            the drive: camera images (raw or compressed), /tf, and for the\n"
@@ -69,7 +69,8 @@ const char* kUsage =
     "  --out DIR          mesh.ply, cloud.pcd, cloud_all.pcd, timings.md, timings.csv\n"
     "  --config YAML      sections sync, plane_sweep, detector, depth_mask, tsdf over the\n"
     "                     stage defaults (as vehicle.launch's config:=)\n"
-    "  --detector D       nanodet (default, as vehicle.launch), darknet (yolov3-tiny), a\n"
+    "  --detector D       nanodet (default, as vehicle.launch), finetuned (nanodet_fisheye.yaml:\n"
+    "                     scripts/tools/train_vehicle_detector), darknet (yolov3-tiny), a\n"
     "                     model YAML, ground_truth (the oracle: the drive's true boxes)\n"
     "                     or none (nothing masked)\n"
     "  --depth SRC        sweep (default): plane-sweep depth; gt: the bag's ground-truth\n"
@@ -225,7 +226,8 @@ int main(int argc, char** argv) {
     if (!config_path.empty()) cli::requireInputFile("--config", config_path);
     std::error_code ec;
     if (!std::filesystem::is_directory(config_dir, ec)) throw cli::UsageError("--config-dir: " + config_dir + " is not a folder");
-    if (detector != "none" && detector != "ground_truth" && detector != "nanodet" && detector != "darknet")
+    if (detector != "none" && detector != "ground_truth" && detector != "nanodet" && detector != "finetuned" &&
+        detector != "darknet")
       cli::requireInputFile("--detector", detector);
     cli::prepareOutputDir("--out", out);
     if (!save_depth.empty()) cli::prepareOutputDir("--save-depth", save_depth);
@@ -251,6 +253,7 @@ int main(int argc, char** argv) {
     if (detector != "none" && detector != "ground_truth") {
       std::string yaml = detector;
       if (detector == "nanodet") yaml = config_dir + "/detector/nanodet.yaml";
+      else if (detector == "finetuned") yaml = config_dir + "/detector/nanodet_fisheye.yaml";
       else if (detector == "darknet") yaml = config_dir + "/detector/yolov3-tiny.yaml";
       // The detector stage's config (thresholds, DNN device of the `detector`
       // section) with the model chosen by --detector, as the nodelet loads it.
