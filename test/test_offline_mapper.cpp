@@ -245,6 +245,14 @@ TEST(OfflineMapper, MapsADriveAndWritesTimings) {
     EXPECT_EQ(WEXITSTATUS(rc), 2) << c.args << "\n" << out;
     EXPECT_EQ(out.substr(0, c.expected.size()), c.expected) << c.args << "\n" << out;
   }
+  // The fine-tuned detector's model YAML lives in the cache; a fresh cache has none.
+  out = run("FISHEYE_MAPPING_CACHE=" + kDir + "/nocache " + base + " --out " + kDir + "/map --detector finetuned", &rc);
+  EXPECT_EQ(WEXITSTATUS(rc), 2) << out;
+  EXPECT_NE(out.find("offline_mapper: --detector finetuned: " + kDir +
+                     "/nocache/models/finetuned/nanodet-fisheye.yaml does not exist (make it with "
+                     "scripts/tools/train_vehicle_detector)"),
+            std::string::npos)
+      << out;
   out = run(std::string(FM_OFFLINE_MAPPER) + " --bag " + kDir + " --camchain /tmp --mount /tmp --out " + kDir + "/m", &rc);
   EXPECT_EQ(WEXITSTATUS(rc), 2);
   EXPECT_NE(out.find("offline_mapper: --bag: " + kDir + " is a directory, expected a file"), std::string::npos) << out;

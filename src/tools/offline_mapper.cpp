@@ -58,6 +58,13 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double msSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
 
+// The model YAML scripts/tools/train_vehicle_detector writes (with the score
+// threshold it chose on validation), as vehicle.launch's `finetuned_model`.
+std::string finetunedModelYaml() {
+  return fm::expandPath("${FISHEYE_MAPPING_CACHE:-${XDG_CACHE_HOME:-~/.cache}/fisheye_mapping}") +
+         "/models/finetuned/nanodet-fisheye.yaml";
+}
+
 const char* kUsage =
     "usage: offline_mapper --bag B --camchain F --mount F --out DIR [--config vehicle.yaml]\n"
     "       [--detector nanodet|finetuned|darknet|ground_truth|none|MODEL.yaml] [--depth sweep|gt]\n"
@@ -69,7 +76,8 @@ const char* kUsage =
     "  --out DIR          mesh.ply, cloud.pcd, cloud_all.pcd, timings.md, timings.csv\n"
     "  --config YAML      sections sync, plane_sweep, detector, depth_mask, tsdf over the\n"
     "                     stage defaults (as vehicle.launch's config:=)\n"
-    "  --detector D       nanodet (default, as vehicle.launch), finetuned (nanodet_fisheye.yaml:\n"
+    "  --detector D       nanodet (default, as vehicle.launch), finetuned (the cache's\n"
+    "                     models/finetuned/nanodet-fisheye.yaml, made by\n"
     "                     scripts/tools/train_vehicle_detector), darknet (yolov3-tiny), a\n"
     "                     model YAML, ground_truth (the oracle: the drive's true boxes)\n"
     "                     or none (nothing masked)\n"
@@ -226,6 +234,9 @@ int main(int argc, char** argv) {
     if (!config_path.empty()) cli::requireInputFile("--config", config_path);
     std::error_code ec;
     if (!std::filesystem::is_directory(config_dir, ec)) throw cli::UsageError("--config-dir: " + config_dir + " is not a folder");
+    if (detector == "finetuned" && !std::filesystem::is_regular_file(finetunedModelYaml()))
+      throw cli::UsageError("--detector finetuned: " + finetunedModelYaml() +
+                            " does not exist (make it with scripts/tools/train_vehicle_detector)");
     if (detector != "none" && detector != "ground_truth" && detector != "nanodet" && detector != "finetuned" &&
         detector != "darknet")
       cli::requireInputFile("--detector", detector);
@@ -253,7 +264,7 @@ int main(int argc, char** argv) {
     if (detector != "none" && detector != "ground_truth") {
       std::string yaml = detector;
       if (detector == "nanodet") yaml = config_dir + "/detector/nanodet.yaml";
-      else if (detector == "finetuned") yaml = config_dir + "/detector/nanodet_fisheye.yaml";
+      else if (detector == "finetuned") yaml = finetunedModelYaml();
       else if (detector == "darknet") yaml = config_dir + "/detector/yolov3-tiny.yaml";
       // The detector stage's config (thresholds, DNN device of the `detector`
       // section) with the model chosen by --detector, as the nodelet loads it.
