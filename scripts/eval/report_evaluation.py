@@ -149,16 +149,21 @@ def main():
               f"i.e. occupied where the static scene is empty, with the minimum-observation filter ({minobs}) and without "
               "it (1). Depth outliers count too; the difference between the columns is what masking removes.")
     md.append("")
+    # Trail voxels per (preset, variant, detector), read once from map_accuracy's CSVs.
+    counts = {}
+    for preset in PRESETS:
+        for variant in ("cloud", "cloud_all"):
+            for det, _ in DETECTORS:
+                path = os.path.join(o, preset, f"map_{det}", f"{variant}_accuracy.csv")
+                if os.path.exists(path):
+                    counts[(preset, variant, det)] = int(read_csv(path)[0]["trails"])
     md.append("| drive | min. observations | " + " | ".join(n for _, n in DETECTORS) + " |")
     md.append("|---|---|" + "---:|" * len(DETECTORS))
     fig, ax = plt.subplots(figsize=(7, 3.5))
     width = 0.8 / len(DETECTORS)
     for pi, preset in enumerate(PRESETS):
         for variant, label in (("cloud", str(minobs)), ("cloud_all", "1")):
-            vals = []
-            for det, _ in DETECTORS:
-                path = os.path.join(o, preset, f"map_{det}", f"{variant}_accuracy.csv")
-                vals.append(int(read_csv(path)[0]["trails"]) if os.path.exists(path) else 0)
+            vals = [counts.get((preset, variant, det), 0) for det, _ in DETECTORS]
             md.append(f"| {preset} | {label} | " + " | ".join(str(v) for v in vals) + " |")
             if variant == "cloud_all":
                 for di, v in enumerate(vals):
@@ -172,12 +177,7 @@ def main():
     fig.tight_layout()
     fig.savefig(os.path.join(o, "fig8_trails.png"), dpi=110)
     md.append("")
-    trails = {}
-    for preset in PRESETS:
-        for det, _ in DETECTORS:
-            path = os.path.join(o, preset, f"map_{det}", "cloud_all_accuracy.csv")
-            if os.path.exists(path):
-                trails[(preset, det)] = int(read_csv(path)[0]["trails"])
+    trails = {(p, det): n for (p, variant, det), n in counts.items() if variant == "cloud_all"}
     for det, name in DETECTORS[2:]:
         if trails and all(trails.get((p, det)) == trails.get((p, "none")) for p in PRESETS):
             md.append(f"{name} found none of the moving vehicles here, so its column equals no detection.")
@@ -194,20 +194,16 @@ def main():
     md.append("|---|---|---|---:|---:|---:|")
     for preset in PRESETS:
         for variant, label in (("cloud_all", "1"), ("cloud", str(minobs))):
-            counts = {}
-            for det, _ in DETECTORS:
-                path = os.path.join(o, preset, f"map_{det}", f"{variant}_accuracy.csv")
-                if os.path.exists(path):
-                    counts[det] = int(read_csv(path)[0]["trails"])
-            if "ground_truth" not in counts or "none" not in counts:
+            oracle, none = counts.get((preset, variant, "ground_truth")), counts.get((preset, variant, "none"))
+            if oracle is None or none is None:
                 continue
-            oracle, none = counts["ground_truth"], counts["none"]
             for det, name in DETECTORS[2:]:
-                if det not in counts:
+                n = counts.get((preset, variant, det))
+                if n is None:
                     continue
-                rel = (counts[det] - oracle) / oracle if oracle else float("nan")
-                share = (none - counts[det]) / (none - oracle) if none != oracle else float("nan")
-                md.append(f"| {preset} | {label} | {name} | {counts[det]} | {100 * rel:+.1f} % | {100 * share:.0f} % |")
+                rel = (n - oracle) / oracle if oracle else float("nan")
+                share = (none - n) / (none - oracle) if none != oracle else float("nan")
+                md.append(f"| {preset} | {label} | {name} | {n} | {100 * rel:+.1f} % | {100 * share:.0f} % |")
     md.append("")
     md.append("![Fig. 8 analogue](fig8_trails.png)")
     md.append("")
@@ -277,7 +273,7 @@ def main():
     md.append("### Timing")
     md.append("")
     for preset in PRESETS[:1]:
-        for det, name in (("ground_truth", "oracle"), ("nanodet", "COCO NanoDet"), ("finetuned", "fine-tuned NanoDet")):
+        for det, name in DETECTORS[1:]:
             p = os.path.join(o, preset, f"map_{det}", "timings.md")
             if os.path.exists(p):
                 md.append(f"Offline (`offline_mapper`, {preset}, {name}):")
