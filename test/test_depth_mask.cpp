@@ -2,11 +2,13 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdint>
 #include <string>
 
 #include "fisheye_mapping/core/detection/depth_mask.h"
 
 using namespace fisheye_mapping;
+namespace fm = fisheye_mapping;
 
 namespace {
 Detection box(float x0, float y0, float x1, float y1) {
@@ -120,3 +122,29 @@ TEST(StampPairer, BoundedQueues) {
   ASSERT_EQ(out.size(), 1u);
   EXPECT_EQ(*out[0].dets, 19);
 }
+
+// max_pending reconfigured while depth maps wait: the next add releases the
+// excess, oldest first, unmasked and marked as a queue overflow (not as a
+// wait that ran out); detection sets beyond it are dropped and counted.
+TEST(ReconfigureDetection, LowerMaxPendingReleasesTheExcessAsQueueFull) {
+  fm::StampPairer<int, int> pairer(10.0, 5);
+  for (std::uint64_t s = 1; s <= 4; ++s) EXPECT_TRUE(pairer.addDepth(s, int(s), 0.0).empty());
+  pairer.setMaxPending(2);
+  const auto out = pairer.addDepth(5, 5, 0.1);  // 5 waiting, 2 allowed: stamps 1, 2, 3 leave
+  ASSERT_EQ(out.size(), 3u);
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    EXPECT_EQ(out[i].stamp, i + 1);
+    EXPECT_FALSE(out[i].dets.has_value());
+    EXPECT_TRUE(out[i].queue_full);
+  }
+  EXPECT_EQ(pairer.pendingDepth(), 2u);
+  // The wait running out is not a queue overflow.
+  const auto timed_out = pairer.poll(10.5);
+  ASSERT_EQ(timed_out.size(), 2u);
+  EXPECT_FALSE(timed_out[0].queue_full);
+  // Detection sets: 3 without depth, 2 kept, the oldest dropped.
+  for (std::uint64_t s = 20; s < 23; ++s) pairer.addDetections(s, int(s), 11.0);
+  EXPECT_EQ(pairer.pendingDetections(), 2u);
+  EXPECT_EQ(pairer.detectionsDropped(), 1u);
+}
+

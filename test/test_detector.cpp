@@ -9,7 +9,9 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <fstream>
+#include <tuple>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -17,6 +19,7 @@
 #include "fisheye_mapping/core/detection/detector.h"
 
 using namespace fisheye_mapping;
+namespace fm = fisheye_mapping;
 
 namespace {
 
@@ -390,3 +393,50 @@ TEST(NanoDetCoco, FindsTruckAndBicycleInDogJpg) {
   cv::cvtColor(img, grey, cv::COLOR_BGR2GRAY);
   check(det.detect(grey, true), bicycle, "bicycle", 0.4f);
 }
+
+// A stage config without a model, with and without threshold overrides, and
+// model YAMLs with out-of-range thresholds (named with file, key and value).
+TEST(DetectorStageConfig, LoadModelAppliesTheOverridesAndModelYamlsCheckTheirThresholds) {
+  fm::DetectorStageConfig none;
+  EXPECT_THROW(none.loadModel(), std::runtime_error);
+  const std::string dir = ::testing::TempDir() + "/test_params_detector";
+  std::filesystem::create_directories(dir);
+  const std::string base =
+      "format: onnx\nmodel: m.onnx\ninput_size: [64, 64]\nhead: yolov8\nclass_names: [car]\nmoving_classes: [car]\n";
+  const std::string model = dir + "/thresholds.yaml";
+  std::ofstream(model) << base << "score_threshold: 0.3\nnms_threshold: 0.5\n";
+  fm::DetectorStageConfig c;
+  c.model_config = model;
+  const fm::DetectorConfig plain = c.loadModel(), direct = fm::loadDetectorConfig(model);
+  EXPECT_FLOAT_EQ(plain.score_threshold, 0.3f);
+  EXPECT_FLOAT_EQ(direct.score_threshold, 0.3f);
+  EXPECT_FLOAT_EQ(plain.nms_threshold, 0.5f);
+  c.score_threshold = 0.61f;
+  c.nms_threshold = 0.42f;
+  const fm::DetectorConfig over = c.loadModel();
+  EXPECT_FLOAT_EQ(over.score_threshold, 0.61f);
+  EXPECT_FLOAT_EQ(over.nms_threshold, 0.42f);
+  EXPECT_EQ(over.class_names, direct.class_names);
+  c.score_threshold = 1.5f;
+  EXPECT_THROW(c.loadModel(), std::invalid_argument);
+  // A model YAML with out-of-range thresholds: the file, the key and the value.
+  for (const auto& [extra, key, value] : {std::make_tuple("nms_threshold: 0\n", "nms_threshold", "got 0"),
+                                          std::make_tuple("nms_threshold: 1.5\n", "nms_threshold", "got 1.5"),
+                                          std::make_tuple("score_threshold: 1\n", "score_threshold", "got 1"),
+                                          std::make_tuple("score_threshold: -0.2\n", "score_threshold", "got -0.2")}) {
+    const std::string p = dir + "/model.yaml";
+    std::ofstream(p) << base << extra;
+    try {
+      fm::loadDetectorConfig(p);
+      ADD_FAILURE() << "no error for " << extra;
+    } catch (const std::runtime_error& e) {
+      const std::string msg = e.what();
+      EXPECT_NE(msg.find(p), std::string::npos) << msg;
+      EXPECT_NE(msg.find(std::string("'") + key + "'"), std::string::npos) << msg;
+      EXPECT_NE(msg.find(value), std::string::npos) << msg;
+    }
+  }
+  std::ofstream(dir + "/model.yaml") << base << "score_threshold: 0.2\nnms_threshold: 1\n";
+  EXPECT_NO_THROW(fm::loadDetectorConfig(dir + "/model.yaml"));
+}
+

@@ -245,6 +245,23 @@ TEST(OfflineMapper, MapsADriveAndWritesTimings) {
     EXPECT_EQ(WEXITSTATUS(rc), 2) << c.args << "\n" << out;
     EXPECT_EQ(out.substr(0, c.expected.size()), c.expected) << c.args << "\n" << out;
   }
+  // A --config key or section that no stage declares (a typo) stops the run,
+  // named with the file, the section and the known names; nothing is mapped.
+  std::ofstream(kDir + "/typo_key.yaml") << "plane_sweep:\n  resolution: full\ntsdf:\n  max_rnge: 15\n";
+  out = run(base + " --out " + kDir + "/map --config " + kDir + "/typo_key.yaml", &rc);
+  EXPECT_EQ(WEXITSTATUS(rc), 1) << out;
+  EXPECT_NE(out.find("offline_mapper: " + kDir + "/typo_key.yaml: unknown parameter 'max_rnge' in section 'tsdf' (known: "),
+            std::string::npos)
+      << out;
+  EXPECT_NE(out.find(", max_range, "), std::string::npos) << out;
+  std::ofstream(kDir + "/typo_section.yaml") << "tsfd:\n  max_range: 15\n";
+  out = run(base + " --out " + kDir + "/map --config " + kDir + "/typo_section.yaml", &rc);
+  EXPECT_EQ(WEXITSTATUS(rc), 1) << out;
+  EXPECT_NE(out.find("offline_mapper: " + kDir + "/typo_section.yaml: unknown section 'tsfd' (known: sync, plane_sweep, "
+                     "detector, depth_mask, tsdf, rig_tf)"),
+            std::string::npos)
+      << out;
+  EXPECT_EQ(size(kDir + "/map/mesh.ply"), mesh_size);
   // The fine-tuned detector's model YAML lives in the cache; a fresh cache has none.
   out = run("FISHEYE_MAPPING_CACHE=" + kDir + "/nocache " + base + " --out " + kDir + "/map --detector finetuned", &rc);
   EXPECT_EQ(WEXITSTATUS(rc), 2) << out;

@@ -176,6 +176,7 @@ const struct {
      {"--camchain", "--mount", "--reference", "--config", "--set", "--image", "--mask", "--out", "--bag", "--topic",
       "--max-sets"}},
     {"tsdf_benchmark", {"--out", "--frames", "--threads", "--drive"}},
+    {"param_docs", {"docs/parameters.md"}},
 };
 
 TEST(ToolOptions, HelpPrintsTheFullUsageOnStdout) {
@@ -218,6 +219,26 @@ TEST(ToolOptions, AMissingValueNamesTheOption) {
     const std::string option = c.args.substr(c.args.rfind(' ') + 1);
     EXPECT_EQ(r.status, 2) << c.tool << " " << c.args << "\n" << r.err;
     EXPECT_EQ(r.err.rfind(c.tool + ": " + option + " needs a value\n", 0), 0u) << c.tool << "\n" << r.err;
+  }
+}
+
+// depth_eval reads its numbers strictly (it used std::stoi: "8abc" was 8).
+TEST(ToolOptions, DepthEvalRefusesMalformedNumbers) {
+  const std::string base = tool("depth_eval") + " synthetic --camchain " + FM_CONFIG_DIR +
+                           "/rig/default_camchain.yaml --mount " + FM_CONFIG_DIR + "/rig/default_mount.yaml --out " +
+                           ::testing::TempDir() + "/depth_eval_numbers";
+  const struct {
+    std::string args, expected;
+  } cases[] = {
+      {" --frames 8abc", "depth_eval: --frames needs a whole number, got '8abc'\n"},
+      {" --frames 0", "depth_eval: --frames must lie in [1, 100000], got 0\n"},
+      {" --max-range -1", "depth_eval: --max-range must lie in [0.1, 10000], got -1\n"},
+      {" --seed 1.5", "depth_eval: --seed needs a whole number, got '1.5'\n"},
+  };
+  for (const auto& c : cases) {
+    const ToolRunApart r = runToolApart(base + c.args);
+    EXPECT_EQ(r.status, 2) << c.args << "\n" << r.err;
+    EXPECT_EQ(r.err.substr(0, c.expected.size()), c.expected) << c.args << "\n" << r.err;
   }
 }
 

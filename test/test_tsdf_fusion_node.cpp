@@ -413,6 +413,23 @@ TEST_F(TsdfFusionNode, MaxRangeChangesAtRunTime) {
   EXPECT_GT(n_limited, 100u);
   EXPECT_LT(n_limited, n_unlimited);
   EXPECT_TRUE(waitFor([] { return diagValue("max_range (m)") == "3.5"; }, 5.0)) << diagValue("max_range (m)");
+
+  // Out of its declared range (>= 0): refused, not clamped to 0 ("no limit").
+  // The answer reports the running 3.5 back, and the map keeps the limit.
+  dynamic_reconfigure::Reconfigure bad;
+  max_range.value = -3.0;
+  bad.request.config.doubles.push_back(max_range);
+  ASSERT_TRUE(ros::service::call("/tsdf/set_parameters", bad));
+  double reported = -1;
+  for (const auto& d : bad.response.config.doubles) {
+    if (d.name == "max_range") reported = d.value;
+  }
+  EXPECT_EQ(reported, 3.5);
+  double far_refused = 0;
+  size_t n_refused = 0;
+  fuseFromEye(&far_refused, &n_refused);
+  EXPECT_LE(far_refused, 3.5 + 0.15);
+  EXPECT_TRUE(waitFor([] { return diagValue("max_range (m)") == "3.5"; }, 5.0)) << diagValue("max_range (m)");
 }
 
 

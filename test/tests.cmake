@@ -37,6 +37,7 @@ fm_add_test(test_dynamic_objects_node ROSTEST test/launch/dynamic_objects.test
 # --- TSDF fusion and maps --------------------------------------------------
 fm_add_test(test_tsdf SOURCES test/test_tsdf.cpp)
 fm_add_test(test_tsdf_map_file SOURCES test/test_tsdf_map_file.cpp DEPENDS map_tool)
+fm_add_test(test_map_session SOURCES test/test_map_session.cpp)
 fm_add_test(test_map_accuracy SOURCES test/test_map_accuracy.cpp DEPENDS map_accuracy)
 fm_add_test(test_tsdf_fusion_node ROSTEST test/launch/tsdf_fusion.test
   SOURCES test/test_tsdf_fusion_node.cpp DEPENDS fisheye_mapping_nodelets)
@@ -76,12 +77,12 @@ foreach(fm_fuzz_pair ${FM_FUZZ_TARGETS})
 endforeach()
 fm_add_test(test_fuzz_regressions SOURCES test/test_fuzz_regressions.cpp ${FM_FUZZ_SOURCES}
   INCLUDES ${PROJECT_SOURCE_DIR}/src/tools DEFINES FM_FUZZ_DIR="${PROJECT_SOURCE_DIR}/test/fuzz")
-fm_add_test(test_reconfigure_params SOURCES test/test_reconfigure_params.cpp LIBS fisheye_mapping_ros DEPENDS fisheye_mapping_gencfg)
+fm_add_test(test_param_declarations SOURCES test/test_param_declarations.cpp LIBS fisheye_mapping_ros DEPENDS fisheye_mapping_gencfg
+  DEFINES FM_DOCS_DIR="${PROJECT_SOURCE_DIR}/docs")
 fm_add_test(test_rig_geometry SOURCES test/test_rig_geometry.cpp)
 fm_add_test(test_frame_set_mapper SOURCES test/test_frame_set_mapper.cpp)
 fm_add_test(test_conversions SOURCES test/test_conversions.cpp LIBS fisheye_mapping_ros)
 fm_add_test(test_mesh_distance SOURCES test/test_mesh_distance.cpp)
-fm_add_test(test_params SOURCES test/test_params.cpp)
 fm_add_test(test_paths SOURCES test/test_paths.cpp)
 fm_add_test(test_mesh_export SOURCES test/test_mesh_export.cpp)
 fm_add_test(test_mesh_markers SOURCES test/test_mesh_markers.cpp LIBS fisheye_mapping_ros)
@@ -89,9 +90,7 @@ fm_add_test(test_camera_info SOURCES test/test_camera_info.cpp LIBS fisheye_mapp
 fm_add_test(test_zdepth SOURCES test/test_zdepth.cpp)
 fm_add_test(test_stage_stats SOURCES test/test_stage_stats.cpp)
 fm_add_test(test_stage_monitor SOURCES test/test_stage_monitor.cpp LIBS fisheye_mapping_ros)
-add_dependencies(test_tool_options rig_info refine_rig make_drive depth_eval map_accuracy map_tool offline_mapper paced_player plane_sweep_depth)
-fm_add_test(test_reconfigure_detection SOURCES test/test_reconfigure_detection.cpp LIBS fisheye_mapping_ros DEPENDS fisheye_mapping_gencfg)
+add_dependencies(test_tool_options param_docs rig_info refine_rig make_drive depth_eval map_accuracy map_tool offline_mapper paced_player plane_sweep_depth)
 fm_add_test(test_own_rig_node ROSTEST test/launch/own_rig.test SOURCES test/test_own_rig_node.cpp DEPENDS fisheye_mapping_nodelets make_drive paced_player)
-fm_add_test(test_reconfigure_tsdf SOURCES test/test_reconfigure_tsdf.cpp LIBS fisheye_mapping_ros DEPENDS fisheye_mapping_gencfg)
 fm_add_test(test_detector_eval SOURCES test/test_detector_eval.cpp DEPENDS detector_eval)
 fm_add_test(test_launch_files SOURCES test/test_launch_files.cpp INCLUDES ${PROJECT_SOURCE_DIR}/test)

@@ -58,8 +58,9 @@
 #include "fisheye_mapping/Detection2DArray.h"
 #include "fisheye_mapping/core/depth/depth_image.h"
 #include "fisheye_mapping/core/detection/depth_mask.h"
-#include "fisheye_mapping/core/sync/frame_sync.h"
+#include "fisheye_mapping/core/common/stream_timeline.h"
 #include "fisheye_mapping/ros/conversions.h"
+#include "fisheye_mapping/ros/node_options.h"
 #include "fisheye_mapping/ros/ros_params.h"
 #include "fisheye_mapping/ros/stage_monitor.h"
 
@@ -73,16 +74,19 @@ class DepthMaskNodelet : public nodelet::Nodelet {
   void onInit() override {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
-    pnh.param<std::string>("image_transport", transport_, "raw");
-    monitor_ = std::make_unique<StageMonitor>(nh, pnh, "masking");
-    monitor_->setInputExpected(false);
-    // Every masking parameter is declared once, in the core (DepthMaskConfig).
+    // Every masking parameter is declared once, in the core (DepthMaskConfig);
+    // the node's own in DepthMaskNodeOptions. A bad one stops the stage, as in
+    // every stage.
     try {
+      requireKnownParams(pnh, {DepthMaskConfig::params().names(), DepthMaskNodeOptions::params().names()});
       cfg_ = DepthMaskConfig::fromParams(RosParams(pnh));
+      transport_ = DepthMaskNodeOptions::params().read(RosParams(pnh), DepthMaskNodeOptions()).image_transport;
+      monitor_ = std::make_unique<StageMonitor>(nh, pnh, "masking");
     } catch (const std::exception& e) {
-      monitor_->error(std::string("parameters rejected, defaults used: ") + e.what());
-      NODELET_ERROR("depth mask parameters rejected, using the defaults: %s", e.what());
+      NODELET_FATAL("depth mask not started: %s", e.what());
+      return;
     }
+    monitor_->setInputExpected(false);
     pairer_ = std::make_unique<Pairer>(cfg_.wait_for_detections, std::size_t(cfg_.max_pending));
     timeline_ = std::make_unique<StreamTimeline>(2, cfg_.time_reset_threshold);
     monitor_->setExtraReport([this](diagnostic_updater::DiagnosticStatusWrapper& stat) { report(stat); });
@@ -108,23 +112,22 @@ class DepthMaskNodelet : public nodelet::Nodelet {
   // Polls the pairing often enough that a depth map leaves close to its wait.
   static double timerPeriod(double wait) { return std::max(0.005, std::min(0.05, wait / 4)); }
 
-  // The names are the core's (DepthMaskConfig::fromParams, checked against
-  // cfg/DepthMaskReconfigure.cfg by test_reconfigure_detection). Rejected values leave
-  // the running ones, which go back to the server.
+  // The run-time parameters of DepthMaskConfig::params(), each against its
+  // declaration (cfg/DepthMaskReconfigure.cfg is checked against them by
+  // test_param_declarations). A refused value leaves the running ones, which go
+  // back to the caller.
   void onReconfigure(ReconfigureConfig& c) {
     dynamic_reconfigure::Config values;
     c.__toMessage__(values);
     std::lock_guard<std::mutex> lock(mutex_);
-    try {
-      apply(DepthMaskConfig::fromParams(ReconfigureParams(values), cfg_));
-    } catch (const std::exception& e) {
-      monitor_->error(std::string("parameters rejected: ") + e.what());
-      NODELET_ERROR("depth mask parameters rejected, keeping the running ones: %s", e.what());
-      c.margin_px = cfg_.margin_px;
-      c.wait_for_detections = cfg_.wait_for_detections;
-      c.max_pending = cfg_.max_pending;
-      c.time_reset_threshold = cfg_.time_reset_threshold;
+    std::string error;
+    if (const std::optional<DepthMaskConfig> next = reconfigured(DepthMaskConfig::params(), cfg_, values, error)) {
+      apply(*next);
+      return;
     }
+    monitor_->error("parameters refused: " + error);
+    NODELET_ERROR("depth mask parameters refused, keeping the running ones: %s", error.c_str());
+    keepRunningValues(c, std::make_pair(std::cref(DepthMaskConfig::params()), cfg_));
   }
 
   // Called with mutex_ held (at start-up too: the server's first call). Waiting

@@ -41,8 +41,9 @@
 
 #include "fisheye_mapping/Detection2DArray.h"
 #include "fisheye_mapping/core/detection/detector.h"
-#include "fisheye_mapping/core/sync/frame_sync.h"
+#include "fisheye_mapping/core/common/stream_timeline.h"
 #include "fisheye_mapping/ros/conversions.h"
+#include "fisheye_mapping/ros/node_options.h"
 #include "fisheye_mapping/ros/ros_params.h"
 #include "fisheye_mapping/ros/stage_monitor.h"
 
@@ -67,7 +68,6 @@ class DetectorNodelet : public nodelet::Nodelet {
   void onInit() override {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
-    pnh.param<std::string>("image_transport", transport_, "raw");
     monitor_ = std::make_unique<StageMonitor>(nh, pnh, "detections");
     monitor_->setExtraReport([this](diagnostic_updater::DiagnosticStatusWrapper& stat) { report(stat); });
     monitor_->setInputExpected(false);
@@ -83,11 +83,18 @@ class DetectorNodelet : public nodelet::Nodelet {
 
   void loadModel(const ros::NodeHandle& pnh) {
     try {
-      // Every detector parameter is declared once, in the core (DetectorStageConfig).
+      // Every detector parameter is declared once, in the core
+      // (DetectorStageConfig); the node's own in DetectorNodeOptions. A bad
+      // one leaves the stage without a model (ERROR on /diagnostics).
+      requireKnownParams(pnh, {DetectorStageConfig::params().names(), DetectorNodeOptions::params().names()});
+      transport_ = DetectorNodeOptions::params().read(RosParams(pnh), DetectorNodeOptions()).image_transport;
       stage_ = DetectorStageConfig::fromParams(RosParams(pnh));
       const DetectorConfig cfg = stage_.loadModel();
       const DnnDevice device = stage_.device();
       detector_ = std::make_unique<Detector>(cfg, device);
+      // The thresholds in effect (the model YAML's unless overridden) are the running ones.
+      stage_.score_threshold = cfg.score_threshold;
+      stage_.nms_threshold = cfg.nms_threshold;
       NODELET_INFO("detector: %s head, %dx%d input, %zu classes, score %.3g nms %.3g, backend %s target %s, model %s",
                    headName(cfg.head), cfg.input_width, cfg.input_height, cfg.class_names.size(), cfg.score_threshold,
                    cfg.nms_threshold, device.backend.c_str(), device.target.c_str(), cfg.model_path.c_str());
@@ -108,28 +115,27 @@ class DetectorNodelet : public nodelet::Nodelet {
     reconfigure_->setCallback([this](ReconfigureConfig& c, uint32_t) { onReconfigure(c); });
   }
 
-  // The names are the core's (DetectorStageConfig::fromParams, checked against
-  // cfg/DetectorReconfigure.cfg by test_reconfigure_detection). Rejected values leave the
-  // running ones, which go back to the server.
+  // The run-time parameters of DetectorStageConfig::params(), each against its
+  // declaration (cfg/DetectorReconfigure.cfg is checked against them by
+  // test_param_declarations). A refused value leaves the running ones, which
+  // go back to the caller.
   void onReconfigure(ReconfigureConfig& c) {
     dynamic_reconfigure::Config values;
     c.__toMessage__(values);
     {
       std::lock_guard<std::mutex> lock(mutex_);
-      try {
-        const DetectorStageConfig next = DetectorStageConfig::fromParams(ReconfigureParams(values), stage_);
-        detector_->setThresholds(*next.score_threshold, *next.nms_threshold);
-        stage_ = next;
+      std::string error;
+      const std::optional<DetectorStageConfig> next = reconfigured(DetectorStageConfig::params(), stage_, values, error);
+      if (next) {
+        detector_->setThresholds(*next->score_threshold, *next->nms_threshold);
+        stage_ = *next;
         NODELET_INFO("detector reconfigured: score %.3g nms %.3g, only moving %d, annotated %d",
                      *stage_.score_threshold, *stage_.nms_threshold, int(stage_.only_moving),
                      int(stage_.publish_annotated));
-      } catch (const std::exception& e) {
-        monitor_->error(std::string("parameters rejected: ") + e.what());
-        NODELET_ERROR("detector parameters rejected, keeping the running ones: %s", e.what());
-        c.score_threshold = decimal(detector_->config().score_threshold);
-        c.nms_threshold = decimal(detector_->config().nms_threshold);
-        c.only_moving = stage_.only_moving;
-        c.publish_annotated = stage_.publish_annotated;
+      } else {
+        monitor_->error("parameters refused: " + error);
+        NODELET_ERROR("detector parameters refused, keeping the running ones: %s", error.c_str());
+        keepRunningValues(c, std::make_pair(std::cref(DetectorStageConfig::params()), stage_));
       }
     }
     if (it_) updateSubscription();  // publish_annotated decides whether detections/image counts

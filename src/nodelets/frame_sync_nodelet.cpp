@@ -52,6 +52,7 @@
 #include "fisheye_mapping/FrameSyncReconfigureConfig.h"
 #include "fisheye_mapping/ros/camera_info.h"
 #include "fisheye_mapping/ros/conversions.h"
+#include "fisheye_mapping/ros/node_options.h"
 #include "fisheye_mapping/ros/ros_params.h"
 #include "fisheye_mapping/ros/stage_monitor.h"
 
@@ -75,10 +76,13 @@ class FrameSyncNodelet : public nodelet::Nodelet {
   void onInit() override {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
-    pnh.param<std::string>("image_transport", transport_, "raw");
     try {
-      // Every sync parameter is declared once, in the core (FrameSyncConfig).
+      // Every sync parameter is declared once, in the core (FrameSyncConfig);
+      // the node's own in FrameSyncNodeOptions.
+      requireKnownParams(pnh, {FrameSyncConfig::params().names(), FrameSyncNodeOptions::params().names()});
       cfg_ = FrameSyncConfig::fromParams(RosParams(pnh));
+      opts_ = FrameSyncNodeOptions::params().read(RosParams(pnh), FrameSyncNodeOptions());
+      transport_ = opts_.image_transport;
       initRigSource(pnh);
       sync_ = makeSync(cfg_);
       monitor_ = std::make_unique<StageMonitor>(nh, pnh, "frame sets");
@@ -106,16 +110,14 @@ class FrameSyncNodelet : public nodelet::Nodelet {
   }
 
   void initRigSource(ros::NodeHandle& pnh) {
-    pnh.param<std::string>("rig_source", rig_source_, "camchain");
+    rig_source_ = opts_.rig.rig_source;
     topics_ = cfg_.image_topics;
-    if (rig_source_ == "camchain") {
+    if (!opts_.rig.fromCameraInfo()) {
       setRig(loadRigFromParams(pnh));
-    } else if (rig_source_ == "camera_info") {
-      if (topics_.empty()) throw std::invalid_argument("~rig_source camera_info: set ~image_topics (camera order)");
-      pnh.param<std::string>("base_frame", base_frame_, "base_link");
-      subscribeCameraInfos(pnh);
     } else {
-      throw std::invalid_argument("~rig_source: must be 'camchain' or 'camera_info', got '" + rig_source_ + "'");
+      if (topics_.empty()) throw std::invalid_argument("~rig_source camera_info: set ~image_topics (camera order)");
+      base_frame_ = opts_.base_frame;
+      subscribeCameraInfos();
     }
   }
 
@@ -133,9 +135,8 @@ class FrameSyncNodelet : public nodelet::Nodelet {
     rig_ = std::move(rig);
   }
 
-  void subscribeCameraInfos(ros::NodeHandle& pnh) {
-    std::vector<std::string> info_topics;
-    pnh.getParam("camera_info_topics", info_topics);
+  void subscribeCameraInfos() {
+    std::vector<std::string> info_topics = opts_.camera_info_topics;
     if (info_topics.empty()) {
       for (const auto& t : topics_) info_topics.push_back(cameraInfoTopic(t));
     }
@@ -189,21 +190,28 @@ class FrameSyncNodelet : public nodelet::Nodelet {
                                   c.time_reset_threshold);
   }
 
-  // Through the core's fromParams (the .cfg names are its names); the sync is
-  // rebuilt, its open sets counted as dropped.
+  // The run-time parameters of FrameSyncConfig::params(), each against its
+  // declaration (a refused value keeps the running ones and reports them
+  // back); the sync is rebuilt, its open sets counted as dropped.
   void onReconfigure(FrameSyncReconfigure& c) {
     dynamic_reconfigure::Config values;
     c.__toMessage__(values);
     std::lock_guard<std::mutex> lock(mutex_);
+    std::string error;
+    const std::optional<FrameSyncConfig> next = reconfigured(FrameSyncConfig::params(), cfg_, values, error);
+    if (!next) {
+      keepRunningValues(c, std::make_pair(std::cref(FrameSyncConfig::params()), cfg_));
+      monitor_->error("sync parameters refused: " + error);
+      NODELET_ERROR("sync parameters refused, running values kept: %s", error.c_str());
+      return;
+    }
     try {
-      FrameSyncConfig next = FrameSyncConfig::fromParams(ReconfigureParams(values));
-      next.image_topics = cfg_.image_topics;
-      auto sync = makeSync(next);
+      auto sync = makeSync(*next);
       for (std::size_t i = 0; i < sync_->open(); ++i) monitor_->dropped("open set (reconfigured)");
       addStats(base_stats_, sync_->stats());
       sync_ = std::move(sync);
       seen_ = {};
-      cfg_ = next;
+      cfg_ = *next;
       NODELET_INFO("frame sync: %s policy, max interval %.4f s, queue %d", toString(cfg_.policy).c_str(),
                    cfg_.max_interval, cfg_.queue_size);
     } catch (const std::exception& e) {
@@ -424,6 +432,7 @@ class FrameSyncNodelet : public nodelet::Nodelet {
     std::unique_ptr<StageStats> stats;  // this camera's input rate
   };
   FrameSyncConfig cfg_;
+  FrameSyncNodeOptions opts_;
   std::string rig_source_, base_frame_;
   std::optional<Rig> rig_;  // set once (camchain: at start; camera_info: when all arrived)
   std::vector<std::string> topics_;

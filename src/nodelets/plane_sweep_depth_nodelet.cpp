@@ -57,9 +57,10 @@
 #include "fisheye_mapping/core/depth/depth_image.h"
 #include "fisheye_mapping/core/depth/depth_stage.h"
 #include "fisheye_mapping/core/depth/plane_sweep.h"
-#include "fisheye_mapping/core/sync/frame_sync.h"
+#include "fisheye_mapping/core/common/stream_timeline.h"
 #include "fisheye_mapping/ros/camera_info.h"
 #include "fisheye_mapping/ros/conversions.h"
+#include "fisheye_mapping/ros/node_options.h"
 #include "fisheye_mapping/ros/ros_params.h"
 #include "fisheye_mapping/ros/stage_monitor.h"
 
@@ -83,31 +84,32 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
   void onInit() override {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
+    double time_reset = 1.0;
     try {
       // The depth stage's parameters are declared once, in the core
       // (DepthStageConfig, PlaneSweepConfig): the offline FrameSetMapper reads
-      // the same names into the same stage object.
+      // the same names into the same stage object; the node's own in
+      // DepthNodeOptions.
+      requireKnownParams(pnh, {DepthStageConfig::params().names(), DepthNodeOptions::params().names()});
       config_ = DepthStageConfig::fromParams(RosParams(pnh));
+      const DepthNodeOptions opts = DepthNodeOptions::params().read(RosParams(pnh), DepthNodeOptions());
+      rig_source_ = opts.rig.rig_source;
+      base_frame_ = opts.base_frame;
+      publish_uniqueness_ = opts.publish_uniqueness;
+      time_reset = opts.time_reset.time_reset_threshold;
       monitor_ = std::make_unique<StageMonitor>(nh, pnh, "depth");
-      pnh.param<std::string>("rig_source", rig_source_, "camchain");
-      if (rig_source_ == "camchain") {
+      if (!opts.rig.fromCameraInfo()) {
         setStage(std::make_unique<DepthStage>(loadRigFromParams(pnh), config_));
-      } else if (rig_source_ == "camera_info") {
-        pnh.param<std::string>("base_frame", base_frame_, "base_link");
+      } else {
         tf_buffer_ = std::make_unique<tf2_ros::Buffer>();
         tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_, nh);
         NODELET_INFO("plane sweep: rig from the frame sets' camera_infos and tf (base frame %s), reference %s",
                      base_frame_.c_str(), config_.reference_camera.c_str());
-      } else {
-        throw std::invalid_argument("~rig_source: must be 'camchain' or 'camera_info', got '" + rig_source_ + "'");
       }
     } catch (const std::exception& e) {
       NODELET_FATAL("plane sweep depth not started: %s", e.what());
       return;
     }
-    pnh.param("publish_uniqueness", publish_uniqueness_, false);
-    double time_reset = 1.0;
-    pnh.param("time_reset_threshold", time_reset, time_reset);
     timeline_ = std::make_unique<StreamTimeline>(1, time_reset);
     monitor_->setExtraReport([this](diagnostic_updater::DiagnosticStatusWrapper& stat) { report(stat); });
     clock_timer_ = nh.createWallTimer(ros::WallDuration(0.2), [this](const ros::WallTimerEvent&) { checkClock(); });
@@ -188,34 +190,37 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
     updateSubscription();
   }
 
-  // The names are the core's (PlaneSweepConfig::fromParams, checked against
-  // cfg/PlaneSweepFilters.cfg by test_reconfigure_params). Filters change in
-  // place; the planes and view thresholds (level kSweepLevel) rebuild the
-  // sweep, except on the first call: its values are the start-up parameters
-  // the stage was built from.
+  // The run-time parameters of PlaneSweepConfig::params() (cfg/PlaneSweepFilters.cfg
+  // is checked against them by test_param_declarations), each against its
+  // declaration: a value outside its range is refused, the running values stay
+  // and are reported back. Filters change in place; the planes and view
+  // thresholds (level kSweepLevel) rebuild the sweep, except on the first call:
+  // its values are the start-up parameters the stage was built from.
   void onReconfigure(PlaneSweepFiltersConfig& c, uint32_t level) {
-    c.consistency_window |= 1;  // odd windows only
     dynamic_reconfigure::Config values;
     c.__toMessage__(values);
     std::lock_guard<std::mutex> lock(mutex_);
-    try {
-      // Over the running sweep: what the .cfg does not hold (min_noise_std, planes, windows) stays.
-      const PlaneSweepConfig next = PlaneSweepConfig::fromParams(ReconfigureParams(values),
-                                                                 stage_ ? stage_->sweepConfig() : config_.sweep);
-      if ((level & kSweepLevel) && reconfigured_) {
-        if (stage_) stage_->setSweepConfig(next);
-        config_.sweep = next;  // also for a stage built later (~rig_source camera_info)
-        NODELET_INFO("sweep rebuilt: near %.2f, far %.1f m, ground %.2f + [%.2f, %.2f] m, min parallax %.3f px",
-                     next.near, next.far, next.ground_height, next.ground_min, next.ground_max, next.min_parallax_px);
-      } else {
-        if (stage_) stage_->setFilters(next.filters);
-        config_.sweep.filters = next.filters;
-      }
-      reconfigured_ = true;
-    } catch (const std::exception& e) {
-      monitor_->error(std::string("sweep parameters rejected: ") + e.what());
-      NODELET_ERROR("sweep parameters rejected: %s", e.what());
+    // Over the running sweep: what the .cfg does not hold (min_noise_std, planes, windows) stays.
+    const PlaneSweepConfig running = stage_ ? stage_->sweepConfig() : config_.sweep;
+    std::string error;
+    const std::optional<PlaneSweepConfig> next = reconfigured(PlaneSweepConfig::params(), running, values, error);
+    if (!next) {
+      keepRunningValues(c, std::make_pair(std::cref(PlaneSweepConfig::params()), running));
+      monitor_->error("sweep parameters refused: " + error);
+      NODELET_ERROR("sweep parameters refused, running values kept: %s", error.c_str());
+      return;
     }
+    if ((level & kSweepLevel) && reconfigured_) {
+      if (stage_) stage_->setSweepConfig(*next);
+      config_.sweep = *next;  // also for a stage built later (~rig_source camera_info)
+      NODELET_INFO("sweep rebuilt: near %.2f, far %.1f m, ground %.2f + [%.2f, %.2f] m, min parallax %.3f px",
+                   next->near, next->far, next->ground_height, next->ground_min, next->ground_max,
+                   next->min_parallax_px);
+    } else {
+      if (stage_) stage_->setFilters(next->filters);
+      config_.sweep.filters = next->filters;
+    }
+    reconfigured_ = true;
   }
 
   void updateSubscription() {

@@ -17,6 +17,7 @@
 #include <tf2_ros/static_transform_broadcaster.h>
 
 #include "fisheye_mapping/ros/conversions.h"
+#include "fisheye_mapping/ros/node_options.h"
 #include "fisheye_mapping/ros/ros_params.h"
 #include "fisheye_mapping/ros/stage_monitor.h"
 
@@ -51,6 +52,7 @@ class RigTfPublisherNodelet : public nodelet::Nodelet {
 
   void publishMounts() {
     if (monitor_) monitor_->input();
+    requireKnownParams(getPrivateNodeHandle(), {RigTfNodeOptions::params().names()});
     const Rig rig = loadRigFromParams(getPrivateNodeHandle());
     std::vector<geometry_msgs::TransformStamped> transforms;
     const ros::Time stamp = ros::Time::now();

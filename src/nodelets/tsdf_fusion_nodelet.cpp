@@ -54,6 +54,9 @@
 #include "fisheye_mapping/ros/camera_info.h"
 #include "fisheye_mapping/ros/conversions.h"
 #include "fisheye_mapping/ros/mesh_markers.h"
+#include "fisheye_mapping/core/common/stream_timeline.h"
+#include "fisheye_mapping/core/tsdf/map_session.h"
+#include "fisheye_mapping/ros/node_options.h"
 #include "fisheye_mapping/ros/ros_params.h"
 #include "fisheye_mapping/ros/stage_monitor.h"
 #include "fisheye_mapping/ros/tsdf_node_helpers.h"
@@ -70,13 +73,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     timer_.stop();
     {
       std::lock_guard<std::mutex> lock(mutex_);
-      if (map_ && !save_on_shutdown_.empty()) {
-        if (changes_ == saved_changes_) {
-          say(false, "map unchanged since it was saved to / loaded from " + save_on_shutdown_ + ": not rewritten");
-        } else {
-          saveToShutdownPath("shutdown");
-        }
-      }
+      if (map_ && session_) session_->shutdown(*map_);
     }
     if (sigterm_acquired_) releaseSigterm();
   }
@@ -85,43 +82,35 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
   void onInit() override {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
-    pnh.param("world_frame", world_frame_, std::string("map"));
-    pnh.param("base_frame", base_frame_, std::string("base_link"));
-    std::string save_on_shutdown;
-    pnh.param("save_map_on_shutdown", save_on_shutdown, std::string());
-    pnh.param("reload_map_on_start", reload_on_start_, false);
-    pnh.param("autosave_period", autosave_period_, 0.0);
-    pnh.param("clear_map_on_time_reset", clear_on_time_reset_, false);
-    pnh.param("time_reset_threshold", time_reset_threshold_, 1.0);
-    if (pnh.hasParam("output_directory")) {
-      NODELET_WARN("~output_directory is no longer read: relative service paths resolve against $ROS_HOME (%s)",
-                   tsdf_node::rosHome().c_str());
-    }
-    pnh.param("publish_period", publish_period_, publish_period_);
     int queue_size = 10;
-    pnh.param("queue_size", queue_size, queue_size);
     TsdfConfig cfg;
     try {
-      if (!(autosave_period_ >= 0.0) || !std::isfinite(autosave_period_)) {
-        throw std::invalid_argument("~autosave_period must be >= 0 seconds (0: off), got " +
-                                    std::to_string(autosave_period_));
+      // Every parameter is declared once: the map's in TsdfConfig, the node's
+      // own (frames, persistence, time resets) in TsdfNodeOptions.
+      requireKnownParams(pnh, {TsdfConfig::params().names(), TsdfNodeOptions::params().names(), {"output_directory"}});
+      if (pnh.hasParam("output_directory")) {
+        NODELET_WARN("~output_directory is no longer read: relative service paths resolve against $ROS_HOME (%s)",
+                     tsdf_node::rosHome().c_str());
       }
-      if (!(time_reset_threshold_ > 0.0) || !std::isfinite(time_reset_threshold_)) {
-        throw std::invalid_argument("~time_reset_threshold must be > 0 seconds, got " +
-                                    std::to_string(time_reset_threshold_));
-      }
-      if (!(publish_period_ > 0.0) || !std::isfinite(publish_period_)) {
-        throw std::invalid_argument("~publish_period must be > 0 seconds, got " + std::to_string(publish_period_));
-      }
+      opts_ = TsdfNodeOptions::params().read(RosParams(pnh), TsdfNodeOptions());
+      world_frame_ = opts_.world_frame;
+      base_frame_ = opts_.base_frame;
+      reload_on_start_ = opts_.reload_map_on_start;
+      autosave_period_ = opts_.autosave_period;
+      clear_on_time_reset_ = opts_.clear_map_on_time_reset;
+      time_reset_threshold_ = opts_.time_reset.time_reset_threshold;
+      timeline_ = std::make_unique<StreamTimeline>(1, time_reset_threshold_);
+      publish_period_ = opts_.publish_period;
+      queue_size = opts_.queue_size;
+      rig_source_ = opts_.rig.rig_source;
       // Relative: against $ROS_HOME, like the services' paths.
-      if (!save_on_shutdown.empty()) save_on_shutdown_ = tsdf_node::outputPath(save_on_shutdown);
+      // The map file's policy (save on shutdown, .1 backup, reload, autosave)
+      // is the core's MapSession.
+      session_ = std::make_unique<MapSession>(
+          opts_.save_map_on_shutdown.empty() ? std::string() : tsdf_node::outputPath(opts_.save_map_on_shutdown),
+          [this](bool error, const std::string& message) { say(error, message); });
       cfg = TsdfConfig::fromParams(RosParams(pnh));
-      pnh.param<std::string>("rig_source", rig_source_, "camchain");
-      if (rig_source_ == "camchain") {
-        rig_ = loadRigFromParams(pnh);
-      } else if (rig_source_ != "camera_info") {
-        throw std::invalid_argument("~rig_source: must be 'camchain' or 'camera_info', got '" + rig_source_ + "'");
-      }
+      if (!opts_.rig.fromCameraInfo()) rig_ = loadRigFromParams(pnh);
       monitor_ = std::make_unique<StageMonitor>(nh, pnh, "tsdf");
       live_ = cfg;
       map_ = std::make_unique<TsdfMap>(cfg);
@@ -140,7 +129,10 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     });
     mesher_ = std::make_unique<TsdfMesher>(cfg.min_observations);
     mesh_markers_ = std::make_unique<MeshMarkerStream>(world_frame_);
-    if (!save_on_shutdown_.empty()) prepareShutdownPath();
+    if (session_->start(*map_, reload_on_start_)) {
+      mesher_->clear();
+      cloud_stale_ = true;
+    }
     sigterm_acquired_ = true;
     NODELET_INFO("%s", acquireSigterm().c_str());
 
@@ -190,7 +182,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
       guarded(timer_errors_, "publish timer", [this] { publish(); });
     });
     if (autosave_period_ > 0.0) {
-      if (save_on_shutdown_.empty()) {
+      if (!session_->enabled()) {
         NODELET_WARN("~autosave_period %.1f s ignored: ~save_map_on_shutdown is not set", autosave_period_);
       } else {
         autosave_timer_ = nh.createWallTimer(ros::WallDuration(autosave_period_), [this](const ros::WallTimerEvent&) {
@@ -209,33 +201,35 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
                  toString(cfg.integrator));
   }
 
-  // dynamic_reconfigure (cfg/TsdfFusion.cfg): the TSDF names go through
-  // TsdfConfig::fromParams over the running config (no name mapped twice;
-  // test_reconfigure_tsdf checks the .cfg against it); publish_period is the
-  // node's own. Only what applies without rebuilding the map is in the .cfg.
-  void onReconfigure(const TsdfFusionConfig& c) {
+  // dynamic_reconfigure (cfg/TsdfFusion.cfg): the map's run-time parameters
+  // (TsdfConfig) and the node's (publish_period), each checked against its
+  // declaration. A value outside its range is refused: the running values
+  // stay and are reported back. Only what applies without rebuilding the map
+  // is run-time.
+  void onReconfigure(TsdfFusionConfig& c) {
     dynamic_reconfigure::Config values;
     c.__toMessage__(values);
-    const ReconfigureParams params(values);
     std::lock_guard<std::mutex> lock(mutex_);
-    TsdfConfig next;
-    try {
-      next = TsdfConfig::fromParams(params, live_);
-    } catch (const std::exception& e) {
-      NODELET_ERROR("reconfigure rejected: %s", e.what());
-      monitor_->error(std::string("reconfigure rejected: ") + e.what());
+    std::string error;
+    std::optional<TsdfConfig> next = reconfigured(TsdfConfig::params(), live_, values, error);
+    std::optional<TsdfNodeOptions> node;
+    if (next) node = reconfigured(TsdfNodeOptions::params(), opts_, values, error);
+    if (!next || !node) {
+      keepRunningValues(c, std::make_pair(std::cref(TsdfConfig::params()), live_),
+                        std::make_pair(std::cref(TsdfNodeOptions::params()), opts_));
+      NODELET_ERROR("reconfigure refused, running values kept: %s", error.c_str());
+      monitor_->error("reconfigure refused: " + error);
       return;
     }
-    if (next.min_observations != live_.min_observations) {
-      mesher_->setMinObservations(next.min_observations);
+    if (next->min_observations != live_.min_observations) {
+      mesher_->setMinObservations(next->min_observations);
       mesh_markers_->markChanged(mesher_->rebuild(*map_));
       cloud_stale_ = true;
     }
-    map_->setMaxRange(next.max_range);
-    live_ = next;
-    double period = publish_period_;
-    params.get("publish_period", period);
-    if (period != publish_period_ && period > 0.0) timer_.setPeriod(ros::WallDuration(publish_period_ = period));
+    map_->setMaxRange(next->max_range);
+    live_ = *next;
+    if (node->publish_period != publish_period_) timer_.setPeriod(ros::WallDuration(publish_period_ = node->publish_period));
+    opts_ = *node;
     NODELET_INFO("reconfigured: max_range %.2f m (0: none), min_observations %d, publish_period %.2f s",
                  live_.max_range, live_.min_observations, publish_period_);
   }
@@ -260,77 +254,6 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
                   where, stamp.toSec(), what.c_str(), static_cast<size_t>(counter));
   }
 
-  // ~save_map_on_shutdown at start: resume from it when asked, else say what
-  // the first save will do with the file there.
-  void prepareShutdownPath() {
-    const std::string& path = save_on_shutdown_;
-    std::error_code ec;
-    if (reload_on_start_) {
-      for (const std::string& p : {path, path + ".1"}) {
-        if (!std::filesystem::exists(p, ec)) continue;
-        try {
-          map_->load(p);
-          ++changes_;
-          if (p == path) {
-            saved_changes_ = changes_;
-          } else {
-            keep_previous_ = false;  // the main file is bad: the next save replaces it, .1 stays
-          }
-          mesher_->clear();
-          cloud_stale_ = true;
-          NODELET_INFO("resumed the map from %s: %zu blocks", p.c_str(), map_->numBlocks());
-          return;
-        } catch (const std::exception& e) {
-          NODELET_ERROR("cannot resume from %s: %s", p.c_str(), e.what());
-        }
-      }
-      NODELET_WARN("~reload_map_on_start: no loadable map at %s (or %s.1); starting empty", path.c_str(), path.c_str());
-      return;
-    }
-    try {
-      if (std::filesystem::exists(path, ec)) {
-        const MapFileInfo info = TsdfMap::readHeader(path);
-        if (info.num_blocks > 0) {
-          NODELET_WARN("%s holds a map of %llu blocks and ~reload_map_on_start is false: this map starts empty; "
-                       "an empty map never replaces it, and the first save keeps it as %s.1",
-                       path.c_str(), static_cast<unsigned long long>(info.num_blocks), path.c_str());
-        }
-      }
-    } catch (const std::exception& e) {
-      NODELET_WARN("%s is not a readable map (%s); the first save keeps it as %s.1", path.c_str(), e.what(),
-                   path.c_str());
-    }
-  }
-
-  // Saves to ~save_map_on_shutdown (mutex_ held): never an empty map over a
-  // non-empty file; the first save of this run keeps the file found there as
-  // <path>.1.
-  bool saveToShutdownPath(const char* why) {
-    MapSaveOptions options;
-    options.refuse_empty_overwrite = true;
-    options.keep_previous = keep_previous_;
-    try {
-      const size_t changes = changes_;
-      std::error_code ec;
-      const bool kept = options.keep_previous && std::filesystem::is_regular_file(save_on_shutdown_, ec);
-      map_->save(save_on_shutdown_, options);
-      keep_previous_ = false;
-      saved_changes_ = changes;
-      ++saves_ok_;
-      say(false, std::string(why) + ": map saved to " + save_on_shutdown_ + " (" + std::to_string(map_->numBlocks()) +
-                     " blocks" + (kept ? ", the file found there kept as .1)" : ")"));
-      return true;
-    } catch (const std::exception& e) {
-      ++saves_failed_;
-      {
-        std::lock_guard<std::mutex> lock(error_mutex_);
-        last_save_error_ = e.what();
-      }
-      say(true, std::string(why) + ": map not saved: " + e.what());
-      return false;
-    }
-  }
-
   // Logs through rosconsole, or on stderr once roscpp has shut down (its
   // console goes with it), as during the shutdown save.
   void say(bool error, const std::string& message) {
@@ -347,21 +270,18 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
 
   void autosave() {
     std::lock_guard<std::mutex> lock(mutex_);
-    // An empty map is never worth a file (and never replaces one).
-    if (!map_ || changes_ == saved_changes_ || map_->numBlocks() == 0) return;
-    saveToShutdownPath("autosave");
+    if (map_) session_->autosave(*map_);
   }
 
   // Time went backwards by more than time_reset_threshold_ (a bag played
   // again, a sim clock reset): forget the time state (last stamp, tf cache)
   // and keep the map, or clear it with ~clear_map_on_time_reset. mutex_ held.
   bool handleTimeReset(const ros::Time& stamp) {
-    if (last_stamp_.isZero() || !(stamp + ros::Duration(time_reset_threshold_) < last_stamp_)) return false;
-    monitor_->timeReset("depth stamp " + std::to_string(stamp.toSec()) + " is " +
-                        std::to_string((last_stamp_ - stamp).toSec()) + " s older than the last fused frame");
-    NODELET_WARN("depth stamp %.3f is %.3f s older than the last fused frame (%.3f): time went backwards (bag played "
-                 "again or clock reset); tf cache cleared, %s",
-                 stamp.toSec(), (last_stamp_ - stamp).toSec(), last_stamp_.toSec(),
+    // The one time-reset unit of every stage (StreamTimeline; threshold 0: never).
+    const StreamTimeline::Event ev = timeline_->observe(0, std::int64_t(stamp.toNSec()));
+    if (ev.kind != StreamTimeline::Kind::kReset) return false;
+    monitor_->timeReset("depth frames: " + ev.reason);
+    NODELET_WARN("depth frames: %s; tf cache cleared, %s", ev.reason.c_str(),
                  clear_on_time_reset_ ? "map cleared (~clear_map_on_time_reset)"
                                       : "map kept (~clear_map_on_time_reset: false; call ~clear_map to start afresh)");
     last_stamp_ = ros::Time();
@@ -369,7 +289,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     if (clear_on_time_reset_) {
       map_->clear();
       clearMesh();
-      ++changes_;
+      session_->changed();
     }
     return true;
   }
@@ -406,7 +326,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     const size_t lost = map_->numLostBlocks(), write_failures = map_->numSwapWriteFailures();
     if (lost) stat.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN, "swapped blocks lost");
     if (write_failures) stat.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN, "swap writes failed (blocks kept in RAM)");
-    if (saves_failed_) stat.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN, "saves failed");
+    if (session_->savesFailed()) stat.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN, "saves failed");
     stat.add("rig source", rig_source_);
     stat.add("frames fused", frames_fused_);
     stat.add("exceptions in depth callbacks", static_cast<size_t>(depth_errors_));
@@ -418,12 +338,11 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     stat.add("blocks", map_->numBlocks());
     stat.add("active blocks", map_->numActiveBlocks());
     stat.add("mesh blocks on screen", mesh_markers_->numShown());
-    stat.add("saves to save_map_on_shutdown", static_cast<size_t>(saves_ok_));
-    stat.add("failed saves", static_cast<size_t>(saves_failed_));
+    stat.add("saves to save_map_on_shutdown", session_->savesOk());
+    stat.add("failed saves", session_->savesFailed());
     stat.add("max_range (m)", live_.max_range);
     stat.add("min_observations", live_.min_observations);
-    std::lock_guard<std::mutex> elock(error_mutex_);
-    if (!last_save_error_.empty()) stat.add("last save error", last_save_error_);
+    if (const std::string e = session_->lastError(); !e.empty()) stat.add("last save error", e);
   }
 
   // Tells the paced player that this depth frame is finished with.
@@ -467,7 +386,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     const std::shared_ptr<const CameraModel> model = modelOf(msg->header.frame_id, &skipped);
     if (!model) return;
     try {
-      checkDepthImage(*msg, getNodeHandle().resolveName("depth"));
+      checkDepthImage(*msg, getNodeHandle().resolveName("depth_masked/image"));
     } catch (const ImageConversionError& e) {
       skipped = e.what();
       monitor_->dropped("bad image");
@@ -519,7 +438,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
       monitor_->output();  // the stage's product: a frame in the map
       last_stamp_ = msg->header.stamp;
       ++frames_fused_;
-      ++changes_;
+      session_->changed();
       skipped.clear();
       NODELET_DEBUG("fused frame %.3f: %zu valid pixels, %zu blocks", msg->header.stamp.toSec(), stats.valid_pixels,
                     stats.blocks_touched);
@@ -654,7 +573,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     // The file is read and checked whole before the live map is replaced.
     return run(res, req.path, "load map from", [this](const std::string& p) {
       map_->load(p);
-      ++changes_;
+      session_->changed();
       clearMesh();
     });
   }
@@ -665,7 +584,8 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
       map_->clear();
       clearMesh();
       last_stamp_ = ros::Time();
-      ++changes_;
+      timeline_->reset();
+      session_->changed();
       res.success = true;
       res.message = "map cleared";
     } catch (const std::exception& e) {
@@ -702,24 +622,19 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
   std::unique_ptr<dynamic_reconfigure::Server<TsdfFusionConfig>> reconfigure_;
   // The run-time values (cfg/TsdfFusion.cfg) over the start-up config; mutex_.
   TsdfConfig live_;
-  std::string world_frame_, base_frame_, save_on_shutdown_;  // save_on_shutdown_: absolute
+  TsdfNodeOptions opts_;  // the node's options, publish_period as it runs; mutex_
+  std::string world_frame_, base_frame_;
+  std::unique_ptr<MapSession> session_;  // the file of save_map_on_shutdown; mutex_
   bool reload_on_start_ = false, clear_on_time_reset_ = false;
   double autosave_period_ = 0.0, time_reset_threshold_ = 1.0, publish_period_ = 1.0;
   bool sigterm_acquired_ = false;
-  bool keep_previous_ = true;  // the first save to save_map_on_shutdown keeps the file found there as .1
-  // Map changes (frames fused, loads, clears) and the count at the last save
-  // to / load from save_map_on_shutdown (-1: never).
-  size_t changes_ = 0;
-  size_t saved_changes_ = static_cast<size_t>(-1);
   ros::Time last_stamp_;
+  std::unique_ptr<StreamTimeline> timeline_;  // time resets of the depth frames; mutex_
   ros::Time last_stamp_seen_;  // of the last depth frame received (for error logs)
   size_t frames_fused_ = 0;
   // Exceptions caught per kind of callback; service_failures_: requests
   // answered with an error (bad path, bad map file).
   std::atomic<size_t> depth_errors_{0}, service_errors_{0}, timer_errors_{0}, service_failures_{0};
-  std::atomic<size_t> saves_ok_{0}, saves_failed_{0};
-  std::mutex error_mutex_;  // after mutex_ when both are taken
-  std::string last_save_error_;
   bool cloud_stale_ = false;  // the map was cleared or loaded: send the cloud even if no block changed
 };
 

@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <stdexcept>
 
+#include "fisheye_mapping/ros/node_options.h"
 #include "fisheye_mapping/ros/ros_params.h"
 
 namespace fisheye_mapping {
@@ -54,13 +55,14 @@ StageMonitorOptions StageMonitorOptions::fromParams(const ParamSource& params) {
 }
 
 StageMonitorOptions StageMonitorOptions::fromParams(const ParamSource& params, StageMonitorOptions defaults) {
+  // Declared once, with the other node options (DiagnosticOptions).
+  DiagnosticOptions d;
+  d.diagnostic_window = defaults.window_s;
+  d.diagnostic_expected_period = defaults.expected_period_s;
+  d = DiagnosticOptions::params().read(params, d);
   StageMonitorOptions o = defaults;
-  params.get("diagnostic_window", o.window_s);
-  params.get("diagnostic_expected_period", o.expected_period_s);
-  requireField(std::isfinite(o.window_s) && o.window_s > 0, "diagnostic_window", "must be a positive number of seconds",
-               o.window_s);
-  requireField(std::isfinite(o.expected_period_s) && o.expected_period_s > 0, "diagnostic_expected_period",
-               "must be a positive number of seconds", o.expected_period_s);
+  o.window_s = d.diagnostic_window;
+  o.expected_period_s = d.diagnostic_expected_period;
   return o;
 }
 
@@ -71,7 +73,8 @@ StageMonitor::StageMonitor(ros::NodeHandle nh, ros::NodeHandle pnh, std::string 
     : StageMonitor(std::move(stage_name), Options::fromParams(RosParams(pnh), defaults)) {
   // A nodelet's private namespace is its name, as getName() gives it.
   updater_ = std::make_unique<diagnostic_updater::Updater>(nh, pnh, pnh.getNamespace());
-  updater_->setHardwareID(pnh.param<std::string>("hardware_id", pnh.getNamespace()));
+  const DiagnosticOptions d = DiagnosticOptions::params().read(RosParams(pnh), DiagnosticOptions());
+  updater_->setHardwareID(d.hardware_id.empty() ? pnh.getNamespace() : d.hardware_id);
   updater_->add(stage_, this, &StageMonitor::report);
   period_s_ = updater_->getPeriod();
   timer_ = nh.createWallTimer(ros::WallDuration(period_s_), [this](const ros::WallTimerEvent&) { publish(); });

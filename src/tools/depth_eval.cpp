@@ -42,6 +42,8 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include <yaml-cpp/yaml.h>
+
 #include "cli.h"
 #include "fisheye_mapping/core/eval/depth_consistency.h"
 #include "fisheye_mapping/core/depth/depth_image.h"
@@ -154,13 +156,14 @@ int runSynthetic(const std::map<std::string, std::string>& a) {
   const bool realistic = get(a, "realistic", "false") == "true";
   const fm::synth::Realism realism = realistic ? fm::synth::Realism::realistic() : fm::synth::Realism();
   const std::string out = get(a, "out");
-  std::filesystem::create_directories(out);
-  const int frames = std::stoi(get(a, "frames", "8"));
-  const double start = std::stod(get(a, "start", "2.0")), step = std::stod(get(a, "step", "1.0"));
-  const double max_range = std::stod(get(a, "max-range", "60"));
+  const int frames = int(fm::cli::parseInt("--frames", get(a, "frames", "8"), 1, 100000));
+  const double start = fm::cli::parseDouble("--start", get(a, "start", "2.0"), 0.0, 1e6),
+               step = fm::cli::parseDouble("--step", get(a, "step", "1.0"), 1e-3, 1e6);
+  const double max_range = fm::cli::parseDouble("--max-range", get(a, "max-range", "60"), 0.1, 1e4);
   fm::synth::WorldConfig wc;
   wc.preset = get(a, "preset", "urban");
-  wc.seed = static_cast<uint32_t>(std::stoul(get(a, "seed", "1")));
+  wc.seed = static_cast<uint32_t>(fm::cli::parseInt("--seed", get(a, "seed", "1"), 0, 4294967295LL));
+  std::filesystem::create_directories(out);
   wc.route_length = wc.speed * (start + step * frames) + 80;
   wc.asphalt_grain = realism.asphalt_grain;
   wc.clouds = realism.clouds;
@@ -196,7 +199,10 @@ int runSynthetic(const std::map<std::string, std::string>& a) {
     return c;
   };
   fm::DepthFilterConfig vehicle_filters = base.filters, no_texture = base.filters;
-  vehicle_filters.uniqueness = false;  // as config/vehicle.yaml
+  // The filters of config/vehicle.yaml's plane_sweep section, read through
+  // the same declarations as the depth nodelet (not copied by hand).
+  vehicle_filters = fm::DepthFilterConfig::fromParams(
+      fm::YamlParams(YAML::LoadFile(FM_CONFIG_DIR "/vehicle.yaml")["plane_sweep"], "config/vehicle.yaml"), base.filters);
   no_texture.texture = false;
   using Res = fm::SweepResolution;
   fm::PlaneSweep full(configured(Res::Full, none)), half(configured(Res::Half, none)),
@@ -527,7 +533,7 @@ void reportVcharge(const std::string& out, const std::string& camera, const std:
 
 int runVcharge(const std::map<std::string, std::string>& a) {
   const std::string data = get(a, "data"), camera = get(a, "camera"), out = get(a, "out");
-  const double ground_z = std::stod(get(a, "ground-z", std::to_string(kVchargeGroundZ)));
+  const double ground_z = fm::cli::parseDouble("--ground-z", get(a, "ground-z", std::to_string(kVchargeGroundZ)), -10.0, 10.0);
   std::filesystem::create_directories(out);
   // Frames 0-5: reference k = 2 with 0, 1, 3, 4 (the visual comparison) and
   // k + 1 = 3 with 1, 2, 4, 5 (the consistency check).
@@ -604,8 +610,8 @@ int runVcharge(const std::map<std::string, std::string>& a) {
 // another build of depth_eval vcharge).
 int runVchargeCheck(const std::map<std::string, std::string>& a) {
   const std::string data = get(a, "data"), camera = get(a, "camera"), out = get(a, "out");
-  const int k = std::stoi(get(a, "k", "2"));
-  const double ground_z = std::stod(get(a, "ground-z", std::to_string(kVchargeGroundZ)));
+  const int k = int(fm::cli::parseInt("--k", get(a, "k", "2"), 0, 1000000));
+  const double ground_z = fm::cli::parseDouble("--ground-z", get(a, "ground-z", std::to_string(kVchargeGroundZ)), -10.0, 10.0);
   if (k < 0) usage("--k must be >= 0");
   std::filesystem::create_directories(out);
   const VchargeSequence s = loadVcharge(data, camera, k + 2, true);
@@ -643,6 +649,9 @@ int main(int argc, char** argv) {
     if (mode == "vcharge") return runVcharge(a);
     if (mode == "vcharge-check") return runVchargeCheck(a);
     usage("unknown mode '" + mode + "'");
+  } catch (const fm::cli::UsageError& e) {  // a bad option value, found when the run reads it
+    std::cerr << "depth_eval: " << e.what() << "\n" << kUsage;
+    return 2;
   } catch (const std::exception& e) {
     std::cerr << "depth_eval: " << e.what() << "\n";
     return 1;

@@ -49,6 +49,7 @@
 #include "fisheye_mapping/core/mapping/frame_set_mapper.h"
 #include "fisheye_mapping/core/sync/frame_sync.h"
 #include "fisheye_mapping/ros/conversions.h"
+#include "fisheye_mapping/ros/param_registry.h"
 
 namespace fm = fisheye_mapping;
 namespace cli = fm::cli;
@@ -108,9 +109,31 @@ YAML::Node loadYaml(const std::string& path) {
   }
 }
 
-// Stage defaults overlaid with the stage's section of the --config file.
+// Every section of the --config file is a stage (a node of vehicle.launch)
+// and each of its keys a parameter that node declares; std::invalid_argument
+// names the file, the section and the key otherwise.
+void requireKnownConfig(const YAML::Node& config, const std::string& path) {
+  if (!config || config.IsNull()) return;  // no --config (or an empty file)
+  if (!config.IsMap()) throw std::invalid_argument(path + ": expected a map of stage sections");
+  for (const auto& kv : config) {
+    const std::string section = kv.first.as<std::string>();
+    const fm::NodeParamSet* set = nullptr;
+    try {
+      set = &fm::nodeParamSet(section);
+    } catch (const std::invalid_argument& e) {
+      throw std::invalid_argument(path + ": " + e.what());
+    }
+    if (kv.second.IsNull()) continue;
+    if (!kv.second.IsMap()) throw std::invalid_argument(path + ": section '" + section + "' is not a map");
+    set->requireKnown(fm::yamlKeys(kv.second), path);
+  }
+}
+
+// Stage defaults overlaid with the stage's section of the --config file (both
+// checked for unknown names).
 YAML::Node stageParams(const std::string& defaults_file, const YAML::Node& config, const std::string& section) {
   YAML::Node merged = defaults_file.empty() ? YAML::Node(YAML::NodeType::Map) : loadYaml(defaults_file);
+  if (!defaults_file.empty()) fm::nodeParamSet(section).requireKnown(fm::yamlKeys(merged), defaults_file);
   if (config && config[section] && config[section].IsMap())
     for (const auto& kv : config[section]) merged[kv.first.as<std::string>()] = kv.second;
   return merged;
@@ -249,6 +272,7 @@ int main(int argc, char** argv) {
   try {
     const fm::Rig rig = fm::loadKalibrRig(camchain, mount);
     const YAML::Node config = config_path.empty() ? YAML::Node() : loadYaml(config_path);
+    requireKnownConfig(config, config_path);
     const fm::YamlParams sweep_p(stageParams(config_dir + "/plane_sweep_depth.yaml", config, "plane_sweep"), "plane_sweep");
     const fm::YamlParams tsdf_p(stageParams(config_dir + "/tsdf_fusion.yaml", config, "tsdf"), "tsdf");
     const fm::YamlParams mask_p(stageParams("", config, "depth_mask"), "depth_mask");

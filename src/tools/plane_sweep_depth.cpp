@@ -33,6 +33,7 @@
 #include "fisheye_mapping/core/depth/plane_sweep.h"
 #include "fisheye_mapping/core/camera/rig.h"
 #include "fisheye_mapping/ros/conversions.h"
+#include "fisheye_mapping/ros/param_registry.h"
 
 namespace fm = fisheye_mapping;
 
@@ -77,17 +78,10 @@ fm::PlaneSweepConfig readConfig(const std::string& path, const std::vector<std::
   }
   for (const auto& [k, v] : sets) y[k] = YAML::Load(v);
   const fm::YamlParams yaml(y, path.empty() ? "--set" : path);
-  // The depth stage's names (reference camera, supporting views, masks) are
-  // known too: the same file configures the nodelet.
-  const fm::RecordingParams asked(yaml);
-  const fm::PlaneSweepConfig config = fm::PlaneSweepConfig::fromParams(asked);
-  fm::RecordingParams stage_names;
-  fm::DepthStageConfig::fromParams(stage_names);
-  const std::set<std::string> node_names{"publish_uniqueness", "time_reset_threshold"};
-  for (const auto& kv : y) {
-    const std::string key = kv.first.as<std::string>();
-    if (!asked.asked().count(key) && !stage_names.asked().count(key) && !node_names.count(key)) throw std::invalid_argument("unknown parameter '" + key + "'");
-  }
+  // Every name the depth nodelet declares is known (the same file configures
+  // it); anything else is an error naming the key and the known ones.
+  fm::nodeParamSet("plane_sweep").requireKnown(fm::yamlKeys(y), path.empty() ? "--set" : path);
+  const fm::PlaneSweepConfig config = fm::PlaneSweepConfig::fromParams(yaml);
   return config;
 }
 

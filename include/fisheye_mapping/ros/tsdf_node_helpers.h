@@ -1,6 +1,6 @@
 // Node-level policy of the TsdfFusion nodelet kept out of its class
 // (header-only, used by src/nodelets/tsdf_fusion_nodelet.cpp): where the save
-// services write, SIGTERM handling, and the run-time range limit.
+// services write and SIGTERM handling.
 #ifndef FISHEYE_MAPPING_ROS_TSDF_NODE_HELPERS_H_
 #define FISHEYE_MAPPING_ROS_TSDF_NODE_HELPERS_H_
 

@@ -1,6 +1,7 @@
 # Sources of the core's common stage (included by CMakeLists.txt).
 set(FM_COMMON_SOURCES
   opencl_context.cpp
+  param_table.cpp
   paths.cpp
   stage_stats.cpp
 )

@@ -5,30 +5,39 @@
 
 #include <opencv2/imgcodecs.hpp>
 
+#include "fisheye_mapping/core/common/param_table.h"
+
 namespace fisheye_mapping {
 
-void DepthStageConfig::validate() const {
-  if (reference_camera.empty()) throw std::invalid_argument("reference_camera: empty camera name");
-  for (const auto& n : support_cameras) {
-    if (n.empty()) throw std::invalid_argument("support_cameras: empty camera name");
-    if (n == reference_camera)
-      throw std::invalid_argument("support_cameras: '" + n + "' is the reference camera");
-  }
-  for (const auto& [name, path] : self_masks) {
-    if (path.empty()) throw std::invalid_argument("self_masks: empty path for camera '" + name + "'");
-  }
-  sweep.validate();
+const ParamTable<DepthStageConfig>& DepthStageConfig::params() {
+  using C = DepthStageConfig;
+  static const ParamTable<C> t = [] {
+    ParamTable<C> t("plane_sweep");
+    t.text("reference_camera", [](C& c) -> std::string& { return c.reference_camera; },
+           "Camera whose depth is computed")
+        .names("support_cameras", [](C& c) -> std::vector<std::string>& { return c.support_cameras; },
+               "Supporting cameras by name; empty: every other camera of the rig")
+        .table("self_masks", [](C& c) -> std::map<std::string, std::string>& { return c.self_masks; },
+               "Camera name -> 8-bit mask image (0 where the camera sees the car itself: never matched)")
+        .include(PlaneSweepConfig::params(), [](C& c) -> PlaneSweepConfig& { return c.sweep; });
+    t.rule([](const C& c) {
+      if (c.reference_camera.empty()) throw std::invalid_argument("reference_camera: empty camera name");
+      for (const auto& n : c.support_cameras) {
+        if (n.empty()) throw std::invalid_argument("support_cameras: empty camera name");
+        if (n == c.reference_camera)
+          throw std::invalid_argument("support_cameras: '" + n + "' is the reference camera");
+      }
+      for (const auto& [name, path] : c.self_masks)
+        if (path.empty()) throw std::invalid_argument("self_masks: empty path for camera '" + name + "'");
+    });
+    return t;
+  }();
+  return t;
 }
 
-DepthStageConfig DepthStageConfig::fromParams(const ParamSource& p) {
-  DepthStageConfig c;
-  p.get("reference_camera", c.reference_camera);
-  p.get("support_cameras", c.support_cameras);
-  p.get("self_masks", c.self_masks);
-  c.sweep = PlaneSweepConfig::fromParams(p);
-  c.validate();
-  return c;
-}
+void DepthStageConfig::validate() const { params().check(*this); }
+
+DepthStageConfig DepthStageConfig::fromParams(const ParamSource& p) { return params().read(p, DepthStageConfig()); }
 
 DepthStage::DepthStage(Rig rig, const DepthStageConfig& config) : rig_(std::move(rig)) {
   config.validate();

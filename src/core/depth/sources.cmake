@@ -1,6 +1,9 @@
 # Sources of the core's depth stage (included by CMakeLists.txt).
 set(FM_DEPTH_SOURCES
   plane_sweep.cpp
+  plane_sweep_config.cpp
+  depth_filters.cpp
+  view_selection.cpp
   plane_sweep_cpu.cpp
   plane_sweep_cl.cpp
   plane_sweep_native.cpp

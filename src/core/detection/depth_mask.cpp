@@ -7,36 +7,44 @@
 #include <stdexcept>
 #include <string>
 
-#include "fisheye_mapping/core/common/params.h"
+#include "fisheye_mapping/core/common/param_table.h"
 
 namespace fisheye_mapping {
 
-void DepthMaskConfig::validate() const {
-  requireField(std::isfinite(margin_px) && margin_px >= 0, "margin_px", "must be >= 0 pixels", margin_px);
-  requireField(std::isfinite(wait_for_detections) && wait_for_detections >= 0, "wait_for_detections",
-          "must be >= 0 seconds", wait_for_detections);
-  requireField(max_pending >= 1, "max_pending", "must be at least 1", max_pending);
-  requireField(!std::isnan(time_reset_threshold), "time_reset_threshold", "must be a number of seconds (<= 0: never)",
-          time_reset_threshold);
-  requireField(std::isfinite(colour_near) && colour_near > 0, "colour_range", "near must be positive", colour_near);
-  requireField(std::isfinite(colour_far) && colour_far > colour_near, "colour_range", "far must be greater than near",
-          colour_far);
+const ParamTable<DepthMaskConfig>& DepthMaskConfig::params() {
+  using C = DepthMaskConfig;
+  using R = ParamRange;
+  constexpr auto kRun = ParamChange::Runtime;
+  static const ParamTable<C> t = [] {
+    ParamTable<C> t("depth_mask");
+    t.number("margin_px", [](C& c) -> double& { return c.margin_px; }, R::atLeast(0), "px",
+             "Pixels added on each side of every box before masking", kRun)
+        .number("wait_for_detections", [](C& c) -> double& { return c.wait_for_detections; }, R::atLeast(0), "s",
+                "Wall time a depth map waits for its detections before it passes unmasked", kRun)
+        .number("max_pending", [](C& c) -> int& { return c.max_pending; }, R::atLeast(1), "",
+                "Depth maps / detection sets held while pairing", kRun)
+        .number("time_reset_threshold", [](C& c) -> double& { return c.time_reset_threshold; }, R::atLeast(0), "s",
+                "Time a stream may step back before the pairing resets; 0: never", kRun)
+        .numbers("colour_range", 2, R::above(0), "m",
+                 [](const C& c) { return std::vector<double>{c.colour_near, c.colour_far}; },
+                 [](C& c, const std::vector<double>& v) {
+                   c.colour_near = v[0];
+                   c.colour_far = v[1];
+                 },
+                 "[near, far] of the colour scale of depth_masked/colour");
+    t.rule([](const C& c) {
+      if (!(c.colour_far > c.colour_near))
+        requireInRange("colour_range", ParamRange::above(c.colour_near), c.colour_far, "m (far greater than near)");
+    });
+    return t;
+  }();
+  return t;
 }
 
+void DepthMaskConfig::validate() const { params().check(*this); }
+
 DepthMaskConfig DepthMaskConfig::fromParams(const ParamSource& p, DepthMaskConfig base) {
-  DepthMaskConfig c = std::move(base);
-  p.get("margin_px", c.margin_px);
-  p.get("wait_for_detections", c.wait_for_detections);
-  p.get("max_pending", c.max_pending);
-  p.get("time_reset_threshold", c.time_reset_threshold);
-  if (std::vector<double> range; p.get("colour_range", range)) {
-    if (range.size() != 2)
-      throw std::invalid_argument("colour_range: needs 2 values [near, far], got " + std::to_string(range.size()));
-    c.colour_near = range[0];
-    c.colour_far = range[1];
-  }
-  c.validate();
-  return c;
+  return params().read(p, std::move(base));
 }
 
 cv::Mat maskDepthBoxes(cv::Mat& depth, const std::vector<Detection>& boxes, float margin_px, int image_w,

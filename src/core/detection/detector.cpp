@@ -1,6 +1,6 @@
 #include "fisheye_mapping/core/detection/detector.h"
 
-#include "fisheye_mapping/core/common/params.h"
+#include "fisheye_mapping/core/common/param_table.h"
 
 #include <opencv2/dnn.hpp>
 #include <opencv2/imgproc.hpp>
@@ -212,28 +212,35 @@ std::string toString(DnnTarget t) {
   return "?";
 }
 
-void DetectorStageConfig::validate() const {
-  if (score_threshold && !scoreThresholdOk(*score_threshold))
-    throw std::invalid_argument("score_threshold: must be in (0, 1), got " + number(*score_threshold));
-  if (nms_threshold && !nmsThresholdOk(*nms_threshold))
-    throw std::invalid_argument("nms_threshold: must be in (0, 1], got " + number(*nms_threshold));
-  if (toString(dnn_backend) == "?")
-    throw std::invalid_argument("dnn_backend: not a backend (" + std::to_string(int(dnn_backend)) + ")");
-  if (toString(dnn_target) == "?")
-    throw std::invalid_argument("dnn_target: not a target (" + std::to_string(int(dnn_target)) + ")");
+const ParamTable<DetectorStageConfig>& DetectorStageConfig::params() {
+  using C = DetectorStageConfig;
+  using R = ParamRange;
+  constexpr auto kRun = ParamChange::Runtime;
+  static const ParamTable<C> t = [] {
+    ParamTable<C> t("detector");
+    t.text("model_config", [](C& c) -> std::string& { return c.model_config; },
+           "Path of a model YAML (config/detector/*.yaml); empty: no model (the stage reports ERROR)")
+        .optionalNumber("score_threshold", [](C& c) -> std::optional<float>& { return c.score_threshold; },
+                        R::strictlyBetween(0, 1), "Smallest class score kept", "the model YAML's", kRun)
+        .optionalNumber("nms_threshold", [](C& c) -> std::optional<float>& { return c.nms_threshold; },
+                        R::aboveUpTo(0, 1), "IoU above which a box is suppressed", "the model YAML's", kRun)
+        .choice("dnn_backend", {"opencv", "default"}, [](const C& c) { return toString(c.dnn_backend); },
+                [](C& c, const std::string& v) { c.dnn_backend = parseDnnBackend(v); }, "cv::dnn backend")
+        .choice("dnn_target", {"cpu", "opencl", "opencl_fp16"}, [](const C& c) { return toString(c.dnn_target); },
+                [](C& c, const std::string& v) { c.dnn_target = parseDnnTarget(v); }, "cv::dnn target")
+        .flag("only_moving", [](C& c) -> bool& { return c.only_moving; },
+              "Publish (and mask) the model's moving classes only", kRun)
+        .flag("publish_annotated", [](C& c) -> bool& { return c.publish_annotated; },
+              "Publish detections/image (the image with the boxes drawn)", kRun);
+    return t;
+  }();
+  return t;
 }
 
+void DetectorStageConfig::validate() const { params().check(*this); }
+
 DetectorStageConfig DetectorStageConfig::fromParams(const ParamSource& p, DetectorStageConfig base) {
-  DetectorStageConfig c = std::move(base);
-  p.get("model_config", c.model_config);
-  if (double v; p.get("score_threshold", v)) c.score_threshold = static_cast<float>(v);
-  if (double v; p.get("nms_threshold", v)) c.nms_threshold = static_cast<float>(v);
-  if (std::string v; p.get("dnn_backend", v)) c.dnn_backend = parseDnnBackend(v);
-  if (std::string v; p.get("dnn_target", v)) c.dnn_target = parseDnnTarget(v);
-  p.get("only_moving", c.only_moving);
-  p.get("publish_annotated", c.publish_annotated);
-  c.validate();
-  return c;
+  return params().read(p, std::move(base));
 }
 
 DnnDevice DetectorStageConfig::device() const { return DnnDevice{toString(dnn_backend), toString(dnn_target)}; }

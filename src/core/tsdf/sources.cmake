@@ -8,4 +8,5 @@ set(FM_TSDF_SOURCES
   tsdf_io.cpp
   tsdf_map.cpp
   tsdf_mesher.cpp
+  map_session.cpp
 )

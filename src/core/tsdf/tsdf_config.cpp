@@ -6,7 +6,7 @@
 #include <utility>
 #include <vector>
 
-#include "fisheye_mapping/core/common/params.h"
+#include "fisheye_mapping/core/common/param_table.h"
 
 namespace fisheye_mapping {
 
@@ -26,51 +26,55 @@ const char* toString(TsdfIntegratorKind kind) {
   return "?";
 }
 
-void TsdfConfig::validate() const {
-  auto positive = [](const char* name, double v) {
-    if (!(v > 0.0) || !std::isfinite(v)) {
-      std::ostringstream msg;
-      msg << "TsdfConfig." << name << " must be positive, got " << v;
-      throw std::invalid_argument(msg.str());
-    }
-  };
-  positive("voxel_size", voxel_size);
-  positive("truncation_voxels", truncation_voxels);
-  positive("max_weight", max_weight);
-  positive("local_map_size.x", local_map_size.x());
-  positive("local_map_size.y", local_map_size.y());
-  positive("local_map_size.z", local_map_size.z());
-  if (!local_map_offset.allFinite()) throw std::invalid_argument("TsdfConfig.local_map_offset must be finite");
-  if (min_observations < 1) throw std::invalid_argument("TsdfConfig.min_observations must be >= 1");
-  if (!(max_range >= 0.0)) throw std::invalid_argument("TsdfConfig.max_range must be >= 0 (0: no limit)");
-  if (threads < 0) throw std::invalid_argument("TsdfConfig.threads must be >= 0");
-  if (integrator != TsdfIntegratorKind::kCpu && integrator != TsdfIntegratorKind::kOpenCl)
-    throw std::invalid_argument("TsdfConfig.integrator: not an integrator (" + std::to_string(int(integrator)) + ")");
+const ParamTable<TsdfConfig>& TsdfConfig::params() {
+  using R = ParamRange;
+  constexpr auto kRun = ParamChange::Runtime;
+  static const ParamTable<TsdfConfig> t = [] {
+    ParamTable<TsdfConfig> t("tsdf");
+    t.number("voxel_size", [](TsdfConfig& c) -> double& { return c.voxel_size; }, R::above(0), "m",
+             "Voxel side (the map's geometry: stored in map files)")
+        .number("truncation_voxels", [](TsdfConfig& c) -> double& { return c.truncation_voxels; }, R::above(0),
+                "voxels", "Truncation distance mu in voxels (mu = truncation_voxels x voxel_size)")
+        .number("max_weight", [](TsdfConfig& c) -> float& { return c.max_weight; }, R::above(0), "",
+                "Cap of the per-voxel observation count (written into map files)")
+        .number("min_observations", [](TsdfConfig& c) -> int& { return c.min_observations; }, R::atLeast(1), "",
+                "Mesh and cloud keep voxels observed at least this often (a change re-meshes the map)", kRun)
+        .number("max_range", [](TsdfConfig& c) -> double& { return c.max_range; }, R::atLeast(0), "m",
+                "Depth beyond this range is not fused; 0: no limit (applies to the next frame)", kRun)
+        .numbers("local_map_size", 3, R::above(0), "m",
+                 [](const TsdfConfig& c) {
+                   return std::vector<double>{c.local_map_size.x(), c.local_map_size.y(), c.local_map_size.z()};
+                 },
+                 [](TsdfConfig& c, const std::vector<double>& v) { c.local_map_size = Eigen::Vector3d(v[0], v[1], v[2]); },
+                 "Active box around the vehicle (map axes), x y z; blocks outside are swapped out")
+        .numbers("local_map_offset", 3, R::any(), "m",
+                 [](const TsdfConfig& c) {
+                   return std::vector<double>{c.local_map_offset.x(), c.local_map_offset.y(), c.local_map_offset.z()};
+                 },
+                 [](TsdfConfig& c, const std::vector<double>& v) {
+                   c.local_map_offset = Eigen::Vector3d(v[0], v[1], v[2]);
+                 },
+                 "Centre of the active box relative to the base frame's origin, x y z")
+        .text("swap_directory", [](TsdfConfig& c) -> std::string& { return c.swap_directory; },
+              "Folder for swapped-out blocks; empty: they stay in memory")
+        .choice("integrator", {"cpu", "opencl"}, [](const TsdfConfig& c) { return toString(c.integrator); },
+                [](TsdfConfig& c, const std::string& v) { c.integrator = parseTsdfIntegratorKind(v); },
+                "Voxel integration: cpu (OpenMP loop, fastest on CPUs) or opencl (the same function as a kernel)")
+        .number("threads", [](TsdfConfig& c) -> int& { return c.threads; }, R::atLeast(0), "",
+                "Threads of the map's parallel loops; 0: the OpenMP default")
+        .text("opencl_device", [](TsdfConfig& c) -> std::string& { return c.opencl_device; },
+              "OpenCL device for integrator opencl: empty = first GPU, else a name substring or index");
+    t.rule([](const TsdfConfig& c) {
+      if (c.integrator != TsdfIntegratorKind::kCpu && c.integrator != TsdfIntegratorKind::kOpenCl)
+        throw std::invalid_argument("integrator: not an integrator (" + std::to_string(int(c.integrator)) + ")");
+    });
+    return t;
+  }();
+  return t;
 }
 
-TsdfConfig TsdfConfig::fromParams(const ParamSource& p, TsdfConfig base) {
-  TsdfConfig c = std::move(base);
-  p.get("voxel_size", c.voxel_size);
-  p.get("truncation_voxels", c.truncation_voxels);
-  double max_weight = c.max_weight;
-  p.get("max_weight", max_weight);
-  c.max_weight = static_cast<float>(max_weight);
-  p.get("min_observations", c.min_observations);
-  p.get("max_range", c.max_range);
-  std::vector<double> size{c.local_map_size.x(), c.local_map_size.y(), c.local_map_size.z()};
-  std::vector<double> offset{c.local_map_offset.x(), c.local_map_offset.y(), c.local_map_offset.z()};
-  p.get("local_map_size", size);
-  p.get("local_map_offset", offset);
-  if (size.size() != 3) throw std::invalid_argument("local_map_size needs 3 values");
-  if (offset.size() != 3) throw std::invalid_argument("local_map_offset needs 3 values");
-  c.local_map_size = Eigen::Vector3d(size[0], size[1], size[2]);
-  c.local_map_offset = Eigen::Vector3d(offset[0], offset[1], offset[2]);
-  p.get("swap_directory", c.swap_directory);
-  if (std::string v; p.get("integrator", v)) c.integrator = parseTsdfIntegratorKind(v);
-  p.get("threads", c.threads);
-  p.get("opencl_device", c.opencl_device);
-  c.validate();
-  return c;
-}
+void TsdfConfig::validate() const { params().check(*this); }
+
+TsdfConfig TsdfConfig::fromParams(const ParamSource& p, TsdfConfig base) { return params().read(p, std::move(base)); }
 
 }  // namespace fisheye_mapping

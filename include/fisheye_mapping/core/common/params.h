@@ -5,7 +5,6 @@
 #define FISHEYE_MAPPING_CORE_COMMON_PARAMS_H_
 
 #include <map>
-#include <set>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -121,35 +120,6 @@ inline void requireField(bool ok, const std::string& field, const std::string& w
   s << field << ": " << what << ", got " << value;
   throw std::invalid_argument(s.str());
 }
-
-/// Passes every get() on to an inner source (or answers nothing without one)
-/// and records each name asked for: which parameters a fromParams() reads, so
-/// that unknown names in a file (typos) can be reported instead of ignored.
-class RecordingParams : public ParamSource {
- public:
-  RecordingParams() = default;
-  explicit RecordingParams(const ParamSource& inner) : inner_(&inner) {}
-  bool get(const std::string& k, double& v) const override { return ask(k, v); }
-  bool get(const std::string& k, int& v) const override { return ask(k, v); }
-  bool get(const std::string& k, bool& v) const override { return ask(k, v); }
-  bool get(const std::string& k, std::string& v) const override { return ask(k, v); }
-  bool get(const std::string& k, std::vector<double>& v) const override { return ask(k, v); }
-  bool get(const std::string& k, std::vector<std::string>& v) const override { return ask(k, v); }
-  bool get(const std::string& k, std::map<std::string, std::string>& v) const override { return ask(k, v); }
-  using ParamSource::get;
-  /// The names asked for so far.
-  const std::set<std::string>& asked() const { return asked_; }
-
- private:
-  template <class T>
-  bool ask(const std::string& k, T& v) const {
-    asked_.insert(k);
-    return inner_ && inner_->get(k, v);
-  }
-  const ParamSource* inner_ = nullptr;
-  mutable std::set<std::string> asked_;  // a record of reads, not state of the source
-};
-
 
 }  // namespace fisheye_mapping
 

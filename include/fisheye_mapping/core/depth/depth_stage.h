@@ -26,8 +26,10 @@ struct DepthStageConfig {
   // car itself; those pixels are never matched).
   std::map<std::string, std::string> self_masks;
   PlaneSweepConfig sweep;
-  // Throws std::invalid_argument naming the field.
+  // Throws std::invalid_argument naming the parameter.
   void validate() const;
+  // The declaration of every parameter, the sweep's included (docs/parameters.md).
+  static const ParamTable<DepthStageConfig>& params();
   // The defaults above overlaid with the parameters reference_camera,
   // support_cameras, self_masks and the plane sweep's (PlaneSweepConfig::fromParams);
   // validated.

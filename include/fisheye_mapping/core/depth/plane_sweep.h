@@ -46,6 +46,9 @@
 
 namespace fisheye_mapping {
 
+template <class Config>
+class ParamTable;  // fisheye_mapping/core/common/param_table.h
+
 // The enumerated parameters of PlaneSweepConfig, each parsed once from its
 // parameter string (parseX throws std::invalid_argument naming the parameter,
 // the allowed values and the bad one) and printed back by toString.
@@ -79,8 +82,10 @@ struct DepthFilterConfig {
   int consistency_window = 5;    // odd
   double gamma = 0.5;            // metres
   double delta = 0.3;
-  // Throws std::invalid_argument naming the field.
+  // Throws std::invalid_argument naming the parameter (params().check).
   void validate() const;
+  // The declaration of every filter parameter (docs/parameters.md).
+  static const ParamTable<DepthFilterConfig>& params();
   // `base` overlaid with the parameters filter_texture, min_texture_snr,
   // min_noise_std, filter_cost, alpha_upper, alpha_lower, split_row,
   // filter_uniqueness, max_ratio, filter_consistency, consistency_window,
@@ -138,8 +143,11 @@ struct PlaneSweepConfig {
                                    // device set takes "opencl"
   int band_rows = 32;              // rows per work item of the cost kernel (opencl)
                                    // or per band of a thread (native)
-  // Throws std::invalid_argument naming the field.
+  // Throws std::invalid_argument naming the parameter (params().check).
   void validate() const;
+  // The declaration of every parameter, the filters' included
+  // (docs/parameters.md). band_rows is not a parameter.
+  static const ParamTable<PlaneSweepConfig>& params();
   // The defaults above overlaid with the parameters of the same names in `p`
   // (filters under the names of cfg/PlaneSweepFilters.cfg; the enumerations
   // as their strings, parsed here); validated. band_rows is not a parameter.

@@ -17,24 +17,29 @@ namespace fisheye_mapping {
 
 class ParamSource;
 
+template <class Config>
+class ParamTable;  // fisheye_mapping/core/common/param_table.h
+
 /// The depth mask stage's parameters (the depth mask nodelet's, and the
 /// depth_mask section of the offline tools' configuration).
 struct DepthMaskConfig {
   double margin_px = 10.0;             ///< boxes grown by this on each side, pixels; >= 0
   double wait_for_detections = 0.5;    ///< s (wall time) a depth map waits for its detections; >= 0
   int max_pending = 30;                ///< depth maps / detection sets held while pairing; >= 1
-  double time_reset_threshold = 1.0;   ///< s a stream may step back before the pairing resets; <= 0: never
+  double time_reset_threshold = 1.0;   ///< s a stream may step back before the pairing resets; 0: never
   /// Parameter colour_range [near, far]: the colour scale of the colour-coded
   /// masked depth, metres; 0 < near < far.
   double colour_near = 1.0;
   double colour_far = 30.0;
 
-  /// Throws std::invalid_argument naming the field and the bad value.
+  /// Throws std::invalid_argument naming the parameter and the bad value.
   void validate() const;
+  /// The declaration of every parameter (docs/parameters.md).
+  static const ParamTable<DepthMaskConfig>& params();
   /// `base` overlaid with the parameters of the same names in `p`
   /// (colour_range: a list of two numbers); validated. The run-time subset
   /// (margin_px, wait_for_detections, max_pending, time_reset_threshold) is
-  /// cfg/DepthMask.cfg's, read through this same function.
+  /// cfg/DepthMaskReconfigure.cfg's, read through this same function.
   static DepthMaskConfig fromParams(const ParamSource& p, DepthMaskConfig base);
   static DepthMaskConfig fromParams(const ParamSource& p) { return fromParams(p, DepthMaskConfig()); }
 };

@@ -142,6 +142,9 @@ std::string toString(DnnTarget t);
 
 /// The detector stage's parameters (the detector nodelet's, and the detector
 /// section of the offline tools' configuration).
+template <class Config>
+class ParamTable;  // fisheye_mapping/core/common/param_table.h
+
 struct DetectorStageConfig {
   /// Path of a model YAML (config/detector/*.yaml; loadDetectorConfig). Empty:
   /// not set (loadModel() throws; the stage runs without a model).
@@ -155,13 +158,15 @@ struct DetectorStageConfig {
   bool only_moving = true;        ///< publish (and mask) the model's moving classes only
   bool publish_annotated = true;  ///< also publish the image with the boxes drawn
 
-  /// Throws std::invalid_argument naming the field and the bad value.
+  /// Throws std::invalid_argument naming the parameter and the bad value.
   void validate() const;
+  /// The declaration of every parameter (docs/parameters.md).
+  static const ParamTable<DetectorStageConfig>& params();
   /// `base` overlaid with the parameters of the same names in `p`
   /// (dnn_backend / dnn_target as their names, parsed here); validated. The
   /// run-time subset (score_threshold, nms_threshold, only_moving,
-  /// publish_annotated: no model reload) is cfg/Detector.cfg's, read through
-  /// this same function.
+  /// publish_annotated: no model reload) is cfg/DetectorReconfigure.cfg's, read
+  /// through this same function.
   static DetectorStageConfig fromParams(const ParamSource& p, DetectorStageConfig base);
   static DetectorStageConfig fromParams(const ParamSource& p) { return fromParams(p, DetectorStageConfig()); }
   /// dnn_backend and dnn_target as the Detector takes them.
@@ -182,8 +187,6 @@ class Detector {
 
   /// Detections in image pixels. `only_moving`: keep the config's moving classes only.
   std::vector<Detection> detect(const cv::Mat& image, bool only_moving = true);
-  /// Raw network outputs of the last detect() (for tests and tools).
-  const std::vector<cv::Mat>& lastOutputs() const { return outs_; }
   const DetectorConfig& config() const { return cfg_; }
   /// New score / NMS thresholds for the next detect() (the network stays).
   /// Throws std::invalid_argument naming the field unless score_threshold is

@@ -15,6 +15,8 @@
 namespace fisheye_mapping {
 
 class ParamSource;  // fisheye_mapping/core/common/params.h
+template <class Config>
+class ParamTable;  // fisheye_mapping/core/common/param_table.h
 
 // Voxel integration backend (see tsdf_integrator.h).
 enum class TsdfIntegratorKind {
@@ -50,8 +52,11 @@ struct TsdfConfig {
 
   double truncation() const { return truncation_voxels * voxel_size; }  // mu, metres
   double blockSize() const { return FM_BLOCK_SIDE * voxel_size; }       // metres
-  // Throws std::invalid_argument naming the field.
+  // Throws std::invalid_argument naming the parameter (params().check).
   void validate() const;
+  // The declaration of every parameter (name, range, description, whether it
+  // may change while running); docs/parameters.md is generated from it.
+  static const ParamTable<TsdfConfig>& params();
 
   // The parameter names of config/tsdf_fusion.yaml over `base` (the
   // defaults above when not given); validated (std::invalid_argument naming

@@ -1,0 +1,104 @@
+// The nodelets' own options (what is no core stage's configuration: where
+// the rig comes from, frames, transports, the TSDF map's persistence, time
+// resets), declared once each like the stages' parameters (ParamTable): read
+// and range-checked from the private parameters, listed in
+// docs/parameters.md, and the names a nodelet accepts besides its stage's.
+// Plain data; no ROS types.
+#ifndef FISHEYE_MAPPING_ROS_NODE_OPTIONS_H_
+#define FISHEYE_MAPPING_ROS_NODE_OPTIONS_H_
+
+#include <string>
+#include <vector>
+
+#include "fisheye_mapping/core/common/param_table.h"
+
+namespace fisheye_mapping {
+
+// Where a stage's rig comes from: `camchain` (the files ~camchain, ~mount)
+// or `camera_info` (CameraInfo messages + tf).
+struct RigSourceOptions {
+  std::string rig_source = "camchain";
+  std::string camchain;  // Kalibr camchain YAML (rig_source camchain)
+  std::string mount;     // mount YAML with T_base_cam0 (rig_source camchain)
+  bool fromCameraInfo() const { return rig_source == "camera_info"; }
+  static const ParamTable<RigSourceOptions>& params();
+};
+
+// The time a stream may step back before the stage treats it as a time reset
+// (a bag replayed, a simulation restarted); 0: never. One meaning in every
+// stage: sync, depth, mask and TSDF.
+struct TimeResetOptions {
+  double time_reset_threshold = 1.0;  // s
+  static const ParamTable<TimeResetOptions>& params();
+};
+
+// Diagnostics (StageMonitor) of every stage.
+struct DiagnosticOptions {
+  double diagnostic_window = 10.0;          // s of the rate window
+  double diagnostic_expected_period = 1.0;  // s between inputs; stalled after 3 of them
+  std::string hardware_id;                  // empty: the node's namespace
+  static const ParamTable<DiagnosticOptions>& params();
+};
+
+// fisheye_mapping/FrameSync (its stage: FrameSyncConfig).
+struct FrameSyncNodeOptions {
+  RigSourceOptions rig;
+  std::string base_frame = "base_link";  // rig_source camera_info: tf parent of the cameras
+  std::string image_transport = "raw";
+  std::vector<std::string> camera_info_topics;  // empty: next to each image topic
+  DiagnosticOptions diagnostics;
+  static const ParamTable<FrameSyncNodeOptions>& params();
+};
+
+// fisheye_mapping/PlaneSweepDepth (its stage: DepthStageConfig).
+struct DepthNodeOptions {
+  RigSourceOptions rig;
+  std::string base_frame = "base_link";
+  bool publish_uniqueness = false;
+  TimeResetOptions time_reset;
+  DiagnosticOptions diagnostics;
+  static const ParamTable<DepthNodeOptions>& params();
+};
+
+// fisheye_mapping/Detector (its stage: DetectorStageConfig).
+struct DetectorNodeOptions {
+  std::string image_transport = "raw";
+  DiagnosticOptions diagnostics;
+  static const ParamTable<DetectorNodeOptions>& params();
+};
+
+// fisheye_mapping/DepthMask (its stage: DepthMaskConfig, which holds its
+// time_reset_threshold).
+struct DepthMaskNodeOptions {
+  std::string image_transport = "raw";
+  DiagnosticOptions diagnostics;
+  static const ParamTable<DepthMaskNodeOptions>& params();
+};
+
+// fisheye_mapping/TsdfFusion (its stage: TsdfConfig).
+struct TsdfNodeOptions {
+  RigSourceOptions rig;
+  std::string world_frame = "map";
+  std::string base_frame = "base_link";
+  double publish_period = 1.0;  // s between mesh / cloud updates (run time)
+  int queue_size = 10;
+  std::string save_map_on_shutdown;  // empty: no save
+  bool reload_map_on_start = false;
+  double autosave_period = 0.0;  // s; 0: off
+  bool clear_map_on_time_reset = false;
+  TimeResetOptions time_reset;
+  DiagnosticOptions diagnostics;
+  static const ParamTable<TsdfNodeOptions>& params();
+};
+
+// fisheye_mapping/RigTfPublisher.
+struct RigTfNodeOptions {
+  std::string camchain;
+  std::string mount;
+  DiagnosticOptions diagnostics;
+  static const ParamTable<RigTfNodeOptions>& params();
+};
+
+}  // namespace fisheye_mapping
+
+#endif  // FISHEYE_MAPPING_ROS_NODE_OPTIONS_H_
