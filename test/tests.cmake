@@ -9,6 +9,7 @@ fm_add_test(test_camera_model_opencl SOURCES test/test_camera_model_opencl.cpp)
 fm_add_test(test_rig_calibration SOURCES test/test_rig_calibration.cpp)
 fm_add_test(test_rig_info SOURCES test/test_rig_info.cpp DEPENDS rig_info)
 fm_add_test(test_rig_refinement SOURCES test/test_rig_refinement.cpp DEPENDS refine_rig make_drive)
+fm_add_test(test_online_calibration SOURCES test/test_online_calibration.cpp)
 fm_add_test(test_rig_tf_publisher ROSTEST test/launch/rig_tf_publisher.test
   SOURCES test/test_rig_tf_publisher.cpp DEPENDS fisheye_mapping_nodelets)
 

@@ -16,6 +16,14 @@
 //                               no forward component)
 //             depth/cost       (32FC1: best matching cost (1 - ZNCC) / 2, NaN none)
 //             depth/uniqueness (32FC1: best / second-best cost; ~publish_uniqueness)
+//             depth/self_calibration (fisheye_mapping/RigSelfCalibration,
+//                               latched: each supporting camera's rotation
+//                               correction, residual and state, after each
+//                               update of the online self-calibration)
+// Services    ~save_calibration (FilePath: the self-calibrated camchain and its
+//             mount, the old files kept as .1; empty path: ~self_calibration_file;
+//             relative: against $ROS_HOME). The same save runs on shutdown
+//             when a correction was applied.
 // Parameters  ~rig_source (camchain | camera_info; default camchain),
 //             ~camchain, ~mount (camchain source), ~base_frame (camera_info
 //             source, default base_link): the rig from the frame sets'
@@ -29,21 +37,27 @@
 //             filter thresholds and near / far / ground_height / ground_min /
 //             ground_max / min_parallax_* / min_overlap also through
 //             dynamic_reconfigure (cfg/PlaneSweepFilters.cfg; the latter
-//             rebuild the sweep), ~time_reset_threshold (s, default 1; 0: never).
+//             rebuild the sweep), ~time_reset_threshold (s, default 1; 0: never),
+//             ~self_calibration* (the online rotation self-calibration, on by
+//             default: core/camera/online_calibration.h), ~self_calibration_file.
 //             /diagnostics (StageMonitor "depth"): input / output rates,
 //             processing time, drops by reason ("busy", "bad input" - logged
 //             with the stamp, the stage goes on), time resets, backend,
-//             supporting views used.
+//             supporting views used, each camera's self-calibration (WARN
+//             naming a camera that gets no update, and why).
 // Time going backwards (frame-set stamps back by more than the threshold, or
 // the sim clock behind the newest stamp) is logged with both stamps and
 // counted; the stage keeps no other state keyed on time (each frame set is
 // swept on its own, the mailbox holds one set).
 #include <algorithm>
 #include <condition_variable>
+#include <cstdio>
+#include <filesystem>
 #include <memory>
 #include <mutex>
 #include <thread>
 
+#include <diagnostic_msgs/DiagnosticStatus.h>
 #include <dynamic_reconfigure/server.h>
 #include <image_transport/image_transport.h>
 #include <nodelet/nodelet.h>
@@ -53,6 +67,8 @@
 #include <tf2_ros/transform_listener.h>
 
 #include "fisheye_mapping/CameraFrameSet.h"
+#include "fisheye_mapping/FilePath.h"
+#include "fisheye_mapping/RigSelfCalibration.h"
 #include "fisheye_mapping/PlaneSweepFiltersConfig.h"
 #include "fisheye_mapping/core/depth/depth_image.h"
 #include "fisheye_mapping/core/depth/depth_stage.h"
@@ -63,6 +79,7 @@
 #include "fisheye_mapping/ros/node_options.h"
 #include "fisheye_mapping/ros/ros_params.h"
 #include "fisheye_mapping/ros/stage_monitor.h"
+#include "fisheye_mapping/ros/tsdf_node_helpers.h"
 
 namespace fisheye_mapping {
 
@@ -75,6 +92,17 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
     }
     mailbox_cv_.notify_all();
     if (worker_.joinable()) worker_.join();
+    // The corrections are not lost with the process.
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (stage_ && stage_->selfCalibration() && stage_->selfCalibration()->changed() && !calibration_file_.empty()) {
+      try {
+        const std::string path = tsdf_node::outputPath(calibration_file_);
+        saveCalibrationTo(path);
+        NODELET_INFO("self-calibration saved on shutdown to %s", path.c_str());
+      } catch (const std::exception& e) {
+        NODELET_ERROR("self-calibration not saved on shutdown: %s", e.what());
+      }
+    }
   }
 
  private:
@@ -85,6 +113,7 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
     double time_reset = 1.0;
+    calibration_pub_ = nh.advertise<RigSelfCalibration>("depth/self_calibration", 1, true);
     try {
       // The depth stage's parameters are declared once, in the core
       // (DepthStageConfig, PlaneSweepConfig): the offline FrameSetMapper reads
@@ -96,6 +125,7 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
       rig_source_ = opts.rig.rig_source;
       base_frame_ = opts.base_frame;
       publish_uniqueness_ = opts.publish_uniqueness;
+      calibration_file_ = opts.self_calibration_file;
       time_reset = opts.time_reset.time_reset_threshold;
       monitor_ = std::make_unique<StageMonitor>(nh, pnh, "depth");
       if (!opts.rig.fromCameraInfo()) {
@@ -115,6 +145,7 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
     clock_timer_ = nh.createWallTimer(ros::WallDuration(0.2), [this](const ros::WallTimerEvent&) { checkClock(); });
     reconfigure_ = std::make_unique<dynamic_reconfigure::Server<PlaneSweepFiltersConfig>>(reconfigure_mutex_, pnh);
     reconfigure_->setCallback([this](PlaneSweepFiltersConfig& c, uint32_t level) { onReconfigure(c, level); });
+    save_service_ = pnh.advertiseService("save_calibration", &PlaneSweepDepthNodelet::saveCalibration, this);
     worker_ = std::thread([this] { work(); });
     advertise(nh);
   }
@@ -130,8 +161,79 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
       backend_ = stage_->backendName();
       reference_name_ = stage_->rig().cameras[stage_->reference()].name;
     }
-    NODELET_INFO("plane sweep on %s, reference %s, %zu supporting camera(s), %s", stage_->backendName().c_str(),
-                 reference_name_.c_str(), stage_->supports().size(), toString(config_.sweep.resolution).c_str());
+    NODELET_INFO("plane sweep on %s, reference %s, %zu supporting camera(s), %s, self-calibration %s",
+                 stage_->backendName().c_str(), reference_name_.c_str(), stage_->supports().size(),
+                 toString(config_.sweep.resolution).c_str(), stage_->selfCalibration() ? "on" : "off");
+    if (const OnlineRigCalibrator* cal = stage_->selfCalibration()) {
+      if (!cal->startError().empty()) {
+        NODELET_ERROR("%s", cal->startError().c_str());
+        monitor_->error(cal->startError());
+      } else if (!cal->config().start_file.empty()) {
+        NODELET_INFO("self-calibration started from %s", cal->config().start_file.c_str());
+      }
+      noteCalibration(std_msgs::Header());
+    }
+  }
+
+  // The self-calibration's state for the diagnostics and the topic (mutex_ held).
+  void noteCalibration(const std_msgs::Header& header) {
+    const OnlineRigCalibrator* cal = stage_->selfCalibration();
+    RigSelfCalibration msg;
+    msg.header = header;
+    msg.reference_camera = stage_->rig().cameras[stage_->reference()].name;
+    msg.frame_sets = cal->frameSets();
+    msg.updates = cal->updates();
+    msg.last_update_ms = cal->lastUpdateMs();
+    msg.note = cal->lastNote();
+    msg.start_error = cal->startError();
+    for (const CameraCalibrationState& c : cal->state()) {
+      CameraSelfCalibration m;
+      m.camera = c.name;
+      m.reference = c.reference;
+      m.level = c.warn ? diagnostic_msgs::DiagnosticStatus::WARN : diagnostic_msgs::DiagnosticStatus::OK;
+      m.status = c.status;
+      for (int a = 0; a < 3; ++a) m.correction_rotvec_deg[a] = c.correction_rotvec_deg[a];
+      m.correction_deg = c.correction_deg;
+      m.residual_deg = c.residual_deg;
+      m.inliers = c.inliers;
+      m.updates = c.updates;
+      m.refused = c.refused;
+      m.restarts = c.restarts;
+      if (c.warn && !c.reference) NODELET_WARN_THROTTLE(10.0, "self-calibration: %s: %s", c.name.c_str(), c.status.c_str());
+      msg.cameras.push_back(m);
+    }
+    calibration_pub_.publish(msg);
+    std::lock_guard<std::mutex> lock(views_mutex_);
+    calibration_ = msg;
+  }
+
+  void saveCalibrationTo(const std::string& path) {
+    std::error_code ec;
+    const std::filesystem::path parent = std::filesystem::path(path).parent_path();
+    if (!parent.empty()) std::filesystem::create_directories(parent, ec);
+    if (ec) throw std::runtime_error("cannot create the folder " + parent.string() + ": " + ec.message());
+    stage_->saveCalibration(path);
+  }
+
+  bool saveCalibration(FilePath::Request& req, FilePath::Response& res) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    const std::string requested = req.path.empty() ? calibration_file_ : req.path;
+    try {
+      if (!stage_) throw std::runtime_error("the depth stage has no rig yet");
+      if (requested.empty()) throw std::invalid_argument("no path given and ~self_calibration_file is empty");
+      const std::string path = tsdf_node::outputPath(requested);
+      saveCalibrationTo(path);
+      res.success = true;
+      res.message = "self-calibrated camchain saved to " + path + " (mount: " +
+                    OnlineRigCalibrator::savedMountPath(path) + ")";
+      NODELET_INFO("%s", res.message.c_str());
+    } catch (const std::exception& e) {
+      res.success = false;
+      res.message = "save_calibration '" + requested + "' failed: " + e.what();
+      monitor_->error(res.message);
+      NODELET_ERROR("%s", res.message.c_str());
+    }
+    return true;
   }
 
   // ~rig_source camera_info (mutex_ held): whether a stage for this set's
@@ -260,6 +362,30 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
     stat.add("backend", backend_.empty() ? "none yet (no rig)" : backend_);
     stat.add("reference camera", reference_name_.empty() ? config_.reference_camera : reference_name_);
     stat.add("supporting views used", used_views_);
+    if (calibration_.cameras.empty()) {
+      stat.add("self-calibration", config_.self_calibration.enabled ? "on, no rig yet" : "off");
+      return;
+    }
+    stat.add("self-calibration", std::to_string(calibration_.updates) + " updates over " +
+                                     std::to_string(calibration_.frame_sets) + " frame sets, last " +
+                                     formatMs(calibration_.last_update_ms) +
+                                     (calibration_.note.empty() ? "" : "; " + calibration_.note));
+    if (!calibration_.start_error.empty()) stat.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN, calibration_.start_error);
+    for (const CameraSelfCalibration& c : calibration_.cameras) {
+      if (c.reference) continue;
+      char line[160];
+      std::snprintf(line, sizeof(line), "correction %.3f deg, residual %.3f deg, %d inliers, %d updates: ",
+                    c.correction_deg, c.residual_deg, c.inliers, c.updates);
+      stat.add("self-calibration " + c.camera, line + c.status);
+      if (c.level != diagnostic_msgs::DiagnosticStatus::OK)
+        stat.mergeSummary(c.level, "self-calibration " + c.camera + ": " + c.status);
+    }
+  }
+
+  static std::string formatMs(double ms) {
+    char b[32];
+    std::snprintf(b, sizeof(b), "%.0f ms", ms);
+    return b;
   }
 
   // The subscription's callback: into the mailbox, replacing a set that still
@@ -334,6 +460,10 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
       }
     }
     const DepthResult r = stage_->compute(images);
+    if (r.calibration_ms > 0) {
+      std_msgs::Header h = ref_img->header;
+      noteCalibration(h);
+    }
     if (!r.dropped_views.empty()) NODELET_INFO_ONCE("supporting view dropped: %s", r.dropped_views.front().c_str());
     for (const auto& w : r.warnings) NODELET_WARN_THROTTLE(10.0, "frame %.3f: %s", ref_img->header.stamp.toSec(), w.c_str());
     {
@@ -366,6 +496,10 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
   std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
   std::unique_ptr<ZDepthConverter> zdepth_;
   bool publish_uniqueness_ = false, reconfigured_ = false;
+  std::string calibration_file_;
+  ros::Publisher calibration_pub_;
+  ros::ServiceServer save_service_;
+  RigSelfCalibration calibration_;  // views_mutex_: the last state, for the diagnostics
   std::mutex mutex_, connect_mutex_;  // mutex_: the stage (worker, reconfigure)
   boost::recursive_mutex reconfigure_mutex_;
   std::unique_ptr<dynamic_reconfigure::Server<PlaneSweepFiltersConfig>> reconfigure_;

@@ -75,6 +75,9 @@ const ParamTable<DepthNodeOptions>& DepthNodeOptions::params() {
               "rig_source camera_info: the tf frame the cameras are mounted on")
         .flag("publish_uniqueness", [](C& c) -> bool& { return c.publish_uniqueness; },
               "Also publish depth/uniqueness (best / second-best cost)")
+        .text("self_calibration_file", [](C& c) -> std::string& { return c.self_calibration_file; },
+              "Self-calibrated camchain written by save_calibration and on shutdown (its mount beside it as "
+              "<name>_mount.yaml; the old ones kept as .1; relative: against $ROS_HOME; empty: no save on shutdown)")
         .include(TimeResetOptions::params(), [](C& c) -> TimeResetOptions& { return c.time_reset; })
         .include(DiagnosticOptions::params(), [](C& c) -> DiagnosticOptions& { return c.diagnostics; });
     return t;

@@ -1,5 +1,8 @@
 // refine_rig: corrects the extrinsic rotations of a rig's support cameras
-// relative to cam0 from image features of a logged drive (core refineRig).
+// relative to cam0 from image features of a logged drive (core refineRig: the
+// same matcher and estimator as the depth stage's online self-calibration,
+// pooled over the chosen frame sets). The depth stage does this by itself
+// while driving; this tool is for a calibration to keep or inspect.
 //
 //   refine_rig --bag B --camchain F --mount F --out CORRECTED_CAMCHAIN.yaml
 //              [--mount-out M.yaml] [--frames N] [--every K]
@@ -158,16 +161,20 @@ int main(int argc, char** argv) {
 
     const fm::RigRefinementResult r = fm::refineRig(rig, ref, sets, masks, cfg);
     std::printf("%zu frame sets; residuals: RMS angular epipolar residual over the inliers, degrees\n", sets.size());
-    std::printf("%-8s %-16s %8s %8s %8s %12s %12s %12s  %s\n", "camera", "status", "matches", "candid.", "inliers",
-                "rms before", "rms after", "correction", "axis (camera frame)");
+    std::printf("held out: truncated RMS residual of each half's fit on the other half's matches (the test of "
+                "\"better\")\n");
+    std::printf("%-8s %-16s %8s %8s %8s %12s %12s %12s %12s %12s  %s\n", "camera", "status", "matches", "candid.",
+                "inliers", "rms before", "rms after", "held out bef", "held out aft", "correction",
+                "axis (camera frame)");
     for (const auto& c : r.cameras) {
       if (c.status == fm::CameraRefinement::Status::kReference) {
         std::printf("%-8s %-16s\n", c.name.c_str(), "reference");
         continue;
       }
-      std::printf("%-8s %-16s %8d %8d %8d %12.4f %12.4f %12.4f  [%.3f %.3f %.3f]", c.name.c_str(),
+      std::printf("%-8s %-16s %8d %8d %8d %12.4f %12.4f %12.4f %12.4f %12.4f  [%.3f %.3f %.3f]", c.name.c_str(),
                   fm::toString(c.status), c.matches, c.candidates, c.inliers, c.rms_before_deg, c.rms_after_deg,
-                  c.correction_deg, c.correction_axis.x(), c.correction_axis.y(), c.correction_axis.z());
+                  c.heldout_before_deg, c.heldout_after_deg, c.correction_deg, c.correction_axis.x(),
+                  c.correction_axis.y(), c.correction_axis.z());
       if (cfg.refine_translation && c.status == fm::CameraRefinement::Status::kApplied)
         std::printf("  translation direction %.4f deg", c.translation_change_deg);
       if (!c.message.empty()) std::printf("  (%s)", c.message.c_str());

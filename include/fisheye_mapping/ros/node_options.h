@@ -55,6 +55,10 @@ struct DepthNodeOptions {
   RigSourceOptions rig;
   std::string base_frame = "base_link";
   bool publish_uniqueness = false;
+  // Where save_calibration (empty request) and the save on shutdown write the
+  // self-calibrated camchain (relative: against $ROS_HOME); empty: no save on
+  // shutdown.
+  std::string self_calibration_file = "fisheye_mapping/self_calibrated_camchain.yaml";
   TimeResetOptions time_reset;
   DiagnosticOptions diagnostics;
   static const ParamTable<DepthNodeOptions>& params();

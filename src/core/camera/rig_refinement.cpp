@@ -34,10 +34,7 @@ Eigen::Matrix3d expSo3(const Eigen::Vector3d& w) {
   return Eigen::AngleAxisd(a, w / a).toRotationMatrix();
 }
 
-struct Match {
-  Eigen::Vector3d f_ref, f_cam;  // unit bearings in each camera's frame
-  double weight = 1.0;           // inverse variance of the residual, relative
-};
+using Match = EpipolarMatch;
 
 // Pixels per radian of the image around ray f (mean over two directions).
 double pixelsPerRadian(const CameraModel& model, const Eigen::Vector3d& f) {
@@ -239,6 +236,97 @@ std::vector<std::pair<int, int>> matchGuided(const Features& a, const Features& 
   return out;
 }
 
+
+// Truncated RMS of the residuals of matches idx at x (radians): a residual
+// beyond tau counts as tau.
+double truncatedRms(const EpipolarModel& model, const std::vector<Match>& matches, const std::vector<int>& idx,
+                    const Eigen::VectorXd& x, double tau) {
+  if (idx.empty()) return 0.0;
+  const Eigen::Matrix3d R = model.rotation(x);
+  const Eigen::Vector3d t = model.direction(x);
+  double s = 0;
+  for (int i : idx) s += std::min(std::pow(EpipolarModel::residual(R, t, matches[i]), 2), tau * tau);
+  return std::sqrt(s / idx.size());
+}
+
+// RANSAC from x0 over the matches idx, then Huber Gauss-Newton on the inliers
+// (three rounds of re-selection). Returns the inliers (indices into matches)
+// at the result *x.
+// Without ransac: Huber Gauss-Newton over all of idx first (cheap; the
+// held-out halves).
+std::vector<int> robustFit(const EpipolarModel& model, const std::vector<Match>& matches, const std::vector<int>& idx,
+                           const RigRefinementConfig& config, std::mt19937_64& rng, Eigen::VectorXd* x,
+                           bool ransac = true) {
+  const int n_par = model.params();
+  const Eigen::VectorXd x0 = *x;
+  const double thr = config.ransac_threshold_deg * kDeg;
+  const auto inliers = [&](const Eigen::VectorXd& xs) {
+    const Eigen::Matrix3d R = model.rotation(xs);
+    const Eigen::Vector3d t = model.direction(xs);
+    std::vector<int> in;
+    for (int i : idx)
+      if (std::abs(EpipolarModel::residual(R, t, matches[i])) < thr) in.push_back(i);
+    return in;
+  };
+  if (int(idx.size()) < n_par) return inliers(x0);
+  if (!ransac) {
+    Eigen::VectorXd xr = x0;
+    if (gaussNewton(model, matches, idx, config.huber_deg * kDeg, config.max_iterations, &xr)) *x = xr;
+  }
+  std::vector<int> best = inliers(*x);
+  std::uniform_int_distribution<int> pick(0, int(idx.size()) - 1);
+  for (int it = 0; ransac && it < config.ransac_iterations; ++it) {
+    std::vector<int> sample;
+    while (int(sample.size()) < n_par) {
+      const int i = idx[pick(rng)];
+      if (std::find(sample.begin(), sample.end(), i) == sample.end()) sample.push_back(i);
+    }
+    Eigen::VectorXd xs = x0;
+    if (!gaussNewton(model, matches, sample, 0.0, 8, &xs)) continue;
+    if ((xs - x0).head<3>().norm() > 2 * config.max_initial_residual_deg * kDeg) continue;
+    std::vector<int> in = inliers(xs);
+    if (in.size() > best.size()) {
+      best.swap(in);
+    }
+  }
+  for (int round = 0; round < 3 && int(best.size()) >= n_par; ++round) {
+    Eigen::VectorXd xr = *x;
+    if (!gaussNewton(model, matches, best, config.huber_deg * kDeg, config.max_iterations, &xr)) break;
+    *x = xr;
+    std::vector<int> in = inliers(*x);
+    if (in == best) break;
+    best.swap(in);
+  }
+  return best;
+}
+
+// Mahalanobis norm of x (in standard errors): x' H x / sigma^2 with H the
+// weighted normal matrix of the residuals over idx at x and sigma^2 their
+// weighted variance.
+double significance(const EpipolarModel& model, const std::vector<Match>& matches, const std::vector<int>& idx,
+                    const Eigen::VectorXd& x) {
+  const int n = model.params();
+  if (int(idx.size()) <= n) return 0.0;
+  const double h = 1e-6;
+  Eigen::MatrixXd H = Eigen::MatrixXd::Zero(n, n);
+  double rr = 0;
+  Eigen::VectorXd J(n);
+  for (int i : idx) {
+    const Match& m = matches[i];
+    const double r = model.residual(x, m);
+    for (int k = 0; k < n; ++k) {
+      Eigen::VectorXd xp = x, xm = x;
+      xp[k] += h, xm[k] -= h;
+      J[k] = (model.residual(xp, m) - model.residual(xm, m)) / (2 * h);
+    }
+    H.noalias() += m.weight * J * J.transpose();
+    rr += m.weight * r * r;
+  }
+  const double sigma2 = rr / double(idx.size() - n);
+  if (!(sigma2 > 0)) return 0.0;
+  return std::sqrt(std::max(0.0, x.dot(H * x)) / sigma2);
+}
+
 }  // namespace
 
 void RigRefinementConfig::validate() const {
@@ -255,6 +343,9 @@ void RigRefinementConfig::validate() const {
   require(ransac_iterations >= 1, "ransac_iterations", "must be >= 1");
   require(huber_deg > 0, "huber_deg", "must be positive");
   require(max_iterations >= 1, "max_iterations", "must be >= 1");
+  require(heldout_truncation_deg > 0 && heldout_truncation_deg <= max_initial_residual_deg, "heldout_truncation_deg",
+          "must be in (0, max_initial_residual_deg]");
+  require(min_significance >= 0 && std::isfinite(min_significance), "min_significance", "must be >= 0");
 }
 
 const char* toString(CameraRefinement::Status status) {
@@ -292,6 +383,299 @@ Rig withRelativePose(const Rig& rig, int reference, int camera, const Eigen::Iso
   return out;
 }
 
+RigMatcher::RigMatcher(const RigRefinementConfig& config, std::vector<cv::Mat> self_masks)
+    : config_(config), self_masks_(std::move(self_masks)) {
+  config_.validate();
+  for (size_t c = 0; c < self_masks_.size(); ++c) {
+    const cv::Mat& m = self_masks_[c];
+    require(m.empty() || m.type() == CV_8UC1, "self-mask of camera " + std::to_string(c),
+            "must be 8-bit single-channel (CV_8UC1)");
+  }
+}
+
+const RigMatcher::Warp& RigMatcher::warpFor(const Rig& rig, int reference, int c) {
+  const int n_cams = int(rig.cameras.size());
+  if (int(warps_.size()) != n_cams || warp_reference_ != reference) {
+    warps_.assign(n_cams, Warp());
+    warp_reference_ = reference;
+  }
+  Warp& w = warps_[c];
+  const CameraModel& ref_model = rig.cameras[reference].model;
+  const Eigen::Matrix3d R_ref_cam =
+      (rig.cameras[reference].T_base_cam.inverse() * rig.cameras[c].T_base_cam).linear();
+  const bool fresh = w.width == ref_model.width() && w.height == ref_model.height() && !w.map_x.empty() &&
+                     Eigen::AngleAxisd(w.R_ref_cam.transpose() * R_ref_cam).angle() < 0.25 * kDeg;
+  if (fresh) return w;
+  const std::vector<Eigen::Vector3f> rays = pixelRays(ref_model);
+  const int width = ref_model.width(), height = ref_model.height();
+  const CameraModel& model = rig.cameras[c].model;
+  const Eigen::Matrix3f R_cam_ref = R_ref_cam.transpose().cast<float>();
+  const cv::Mat& detect = detect_masks_[c];
+  w.map_x.create(height, width, CV_32FC1);
+  w.map_y.create(height, width, CV_32FC1);
+  cv::Mat valid(height, width, CV_8UC1);
+#pragma omp parallel for schedule(static)
+  for (int v = 0; v < height; ++v) {
+    for (int u = 0; u < width; ++u) {
+      const Eigen::Vector3f& r = rays[size_t(v) * width + u];
+      Eigen::Vector2d uv;
+      const bool ok = r.allFinite() && model.project((R_cam_ref * r).cast<double>(), &uv) && model.isInImage(uv, 1.0) &&
+                      (detect.empty() || detect.at<uint8_t>(int(std::lround(uv.y())), int(std::lround(uv.x()))) != 0);
+      w.map_x.at<float>(v, u) = ok ? float(uv.x()) : -1.0f;
+      w.map_y.at<float>(v, u) = ok ? float(uv.y()) : -1.0f;
+      valid.at<uint8_t>(v, u) = ok ? 255 : 0;
+    }
+  }
+  // Keep ORB's and KLT's windows off the border of the resampled view.
+  cv::erode(valid, w.feature_mask, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(33, 33)));
+  w.R_ref_cam = R_ref_cam;
+  w.width = width, w.height = height;
+  return w;
+}
+
+std::vector<std::vector<EpipolarMatch>> RigMatcher::match(const Rig& rig, int reference,
+                                                          const std::vector<cv::Mat>& set, std::vector<int>* raw) {
+  const int n_cams = int(rig.cameras.size());
+  require(reference >= 0 && reference < n_cams, "reference",
+          "camera index " + std::to_string(reference) + " is not in [0, " + std::to_string(n_cams) + ")");
+  require(int(set.size()) == n_cams, "frame set",
+          "has " + std::to_string(set.size()) + " images, the rig has " + std::to_string(n_cams) + " cameras");
+  require(self_masks_.empty() || int(self_masks_.size()) == n_cams, "self_masks",
+          "need none or one per camera (" + std::to_string(n_cams) + "), got " + std::to_string(self_masks_.size()));
+  for (int c = 0; c < n_cams; ++c) {
+    const cv::Mat& im = set[c];
+    const RigCamera& cam = rig.cameras[c];
+    if (im.empty()) {
+      require(c != reference, cam.name, "image is empty");
+      continue;
+    }
+    require(im.type() == CV_8UC1, cam.name, "image must be 8-bit single-channel (CV_8UC1)");
+    require(im.cols == cam.model.width() && im.rows == cam.model.height(), cam.name,
+            "image is " + sizeText(im) + ", calibration says " + std::to_string(cam.model.width()) + "x" +
+                std::to_string(cam.model.height()));
+  }
+  if (int(detect_masks_.size()) != n_cams) {
+    // Where features may be detected: outside the self-mask.
+    detect_masks_.assign(n_cams, cv::Mat());
+    for (int c = 0; c < n_cams && !self_masks_.empty(); ++c) {
+      const cv::Mat& m = self_masks_[c];
+      if (m.empty()) continue;
+      const RigCamera& cam = rig.cameras[c];
+      if (m.cols != cam.model.width() || m.rows != cam.model.height()) {
+        detect_masks_.clear();
+        throw std::invalid_argument("self-mask of " + cam.name + ": is " + sizeText(m) + ", calibration says " +
+                                    std::to_string(cam.model.width()) + "x" + std::to_string(cam.model.height()));
+      }
+      detect_masks_[c] = m == 0;
+    }
+  }
+  // Calibrated pose of each camera relative to the reference.
+  const Eigen::Isometry3d T_base_ref = rig.cameras[reference].T_base_cam;
+  std::vector<Eigen::Isometry3d> T_ref(n_cams);
+  for (int c = 0; c < n_cams; ++c) {
+    T_ref[c] = T_base_ref.inverse() * rig.cameras[c].T_base_cam;
+    if (c != reference)
+      require(T_ref[c].translation().norm() > 1e-6, rig.cameras[c].name, "has no baseline to the reference camera");
+  }
+  // Features come from the reference image and from each support image,
+  // resampled (warp_support) into the reference camera's geometry through the
+  // current rotation: patches then look alike in both, whatever the cameras'
+  // yaw, and only parallax separates them. feature_mask: where features may
+  // lie (outside self-masks, inside the resampled view).
+  const CameraModel& ref_model = rig.cameras[reference].model;
+  const auto geometry = [&](int c) -> const CameraModel& {
+    return config_.warp_support ? ref_model : rig.cameras[c].model;
+  };
+  std::vector<cv::Mat> image(n_cams), feature_mask = detect_masks_;
+  for (int c = 0; c < n_cams; ++c) {
+    if (set[c].empty()) continue;
+    if (!config_.warp_support || c == reference) {
+      image[c] = set[c];
+    } else {
+      const Warp& w = warpFor(rig, reference, c);
+      cv::remap(set[c], image[c], w.map_x, w.map_y, cv::INTER_LINEAR, cv::BORDER_CONSTANT);  // new buffer
+      feature_mask[c] = w.feature_mask;
+    }
+  }
+  const auto masked = [&](int c, const cv::Point2f& p) {
+    if (feature_mask[c].empty()) return false;
+    const int u = int(std::lround(p.x)), v = int(std::lround(p.y));
+    if (u < 0 || v < 0 || u >= feature_mask[c].cols || v >= feature_mask[c].rows) return true;
+    return feature_mask[c].at<uint8_t>(v, u) == 0;
+  };
+  std::vector<Features> feats(n_cams);
+#pragma omp parallel for schedule(dynamic)
+  for (int c = 0; c < n_cams; ++c) {
+    if (image[c].empty()) continue;
+    auto orb = cv::ORB::create(config_.max_features, 1.2f, config_.pyramid_levels, 31, 0, 2, cv::ORB::HARRIS_SCORE,
+                               31, 10);
+    orb->detectAndCompute(image[c], feature_mask[c].empty() ? cv::noArray() : cv::InputArray(feature_mask[c]),
+                          feats[c].keypoints, feats[c].descriptors);
+    feats[c].rays = bearings(geometry(c), feats[c].keypoints);
+  }
+  std::vector<std::vector<Match>> found(n_cams);
+  if (raw) raw->assign(n_cams, 0);
+#pragma omp parallel for schedule(dynamic)
+  for (int c = 0; c < n_cams; ++c) {
+    if (c == reference || image[c].empty()) continue;
+    // Warped features are rays of the reference frame: R = I for the epipolar window.
+    const Eigen::Matrix3d R_match =
+        config_.warp_support ? Eigen::Matrix3d::Identity() : Eigen::Matrix3d(T_ref[c].linear());
+    const auto dm = matchGuided(feats[reference], feats[c], R_match, T_ref[c].translation().normalized(),
+                                config_.max_initial_residual_deg * kDeg, config_.ratio, config_.max_hamming);
+    if (raw) (*raw)[c] = int(dm.size());
+    std::vector<cv::Point2f> p_ref, p_cam;
+    for (const auto& [i, j] : dm) {
+      p_ref.push_back(feats[reference].keypoints[i].pt);
+      p_cam.push_back(feats[c].keypoints[j].pt);
+    }
+    std::vector<uint8_t> ok(p_ref.size(), 1);
+    if (config_.subpixel && !p_ref.empty()) {
+      // The support keypoint moved to where the reference patch fits best.
+      std::vector<cv::Point2f> refined = p_cam;
+      std::vector<float> err;
+      cv::calcOpticalFlowPyrLK(image[reference], image[c], p_ref, refined, ok, err,
+                               cv::Size(config_.klt_window, config_.klt_window), 1,
+                               cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 30, 0.005),
+                               cv::OPTFLOW_USE_INITIAL_FLOW);
+      for (size_t i = 0; i < refined.size(); ++i) {
+        if (ok[i] && cv::norm(refined[i] - p_cam[i]) < 3.0) p_cam[i] = refined[i];
+        else ok[i] = 0;
+      }
+    }
+    const CameraModel& m_ref = rig.cameras[reference].model;
+    const CameraModel& m_cam = rig.cameras[c].model;
+    // The warp's rotation (not exactly the rig's: maps are kept while it moves little).
+    const Eigen::Matrix3d R_cam_ref =
+        config_.warp_support ? warps_[c].R_ref_cam.transpose() : Eigen::Matrix3d(T_ref[c].linear().transpose());
+    for (size_t i = 0; i < p_ref.size(); ++i) {
+      if (!ok[i] || masked(reference, p_ref[i]) || masked(c, p_cam[i])) continue;
+      Match m;
+      if (!m_ref.unproject(Eigen::Vector2d(p_ref[i].x, p_ref[i].y), &m.f_ref)) continue;
+      if (!geometry(c).unproject(Eigen::Vector2d(p_cam[i].x, p_cam[i].y), &m.f_cam)) continue;
+      m.f_ref.normalize(), m.f_cam.normalize();
+      // A warped pixel's ray is the support camera's ray rotated by the warp's rotation.
+      if (config_.warp_support) m.f_cam = R_cam_ref * m.f_cam;
+      if (config_.weight_by_resolution) {
+        // Pixel noise in both images as an angle: 1/s0^2 + 1/s1^2.
+        const double s0 = pixelsPerRadian(m_ref, m.f_ref), s1 = pixelsPerRadian(m_cam, m.f_cam);
+        if (!(s0 > 0 && s1 > 0)) continue;
+        m.weight = 1.0 / (1.0 / (s0 * s0) + 1.0 / (s1 * s1));
+      }
+      found[c].push_back(m);
+    }
+  }
+  return found;
+}
+
+CameraRefinement estimateCameraCorrection(const std::vector<EpipolarMatch>& matches, const Eigen::Isometry3d& T_ref_cam,
+                                          const RigRefinementConfig& config, std::mt19937_64& rng,
+                                          Eigen::Isometry3d* T_estimated) {
+  config.validate();
+  CameraRefinement out;
+  out.status = CameraRefinement::Status::kTooFewInliers;
+  out.matches = int(matches.size());
+  *T_estimated = T_ref_cam;
+  const Eigen::Vector3d t0 = T_ref_cam.translation();
+  require(t0.norm() > 1e-6, "camera", "has no baseline to the reference camera");
+  const EpipolarModel model(T_ref_cam.linear(), t0, config.refine_translation);
+  const Eigen::Vector3d t_dir = t0.normalized();
+  const Eigen::Matrix3d R0 = T_ref_cam.linear();
+
+  // Candidates: near the epipolar plane at the calibration, away from the
+  // epipoles, and in front of both cameras (or too distant to tell).
+  std::vector<Match> cand;
+  const double min_sin = std::sin(2.0 * kDeg);
+  for (const Match& m : matches) {
+    if (!m.f_ref.allFinite() || !m.f_cam.allFinite() || !(m.weight > 0)) continue;
+    const Eigen::Vector3d g = R0 * m.f_cam;
+    if (t_dir.cross(m.f_ref).norm() < min_sin || t_dir.cross(g).norm() < min_sin) continue;
+    if (std::abs(EpipolarModel::residual(R0, t_dir, m)) > config.max_initial_residual_deg * kDeg) continue;
+    if (std::acos(std::clamp(m.f_ref.dot(g), -1.0, 1.0)) > 1.0 * kDeg) {
+      // lambda_ref f_ref - lambda_cam g = t in the least-squares sense.
+      Eigen::Matrix<double, 3, 2> A;
+      A << m.f_ref, -g;
+      const Eigen::Vector2d lambda = (A.transpose() * A).ldlt().solve(A.transpose() * t0);
+      if (!(lambda.x() > 0 && lambda.y() > 0)) continue;
+    }
+    cand.push_back(m);
+  }
+  out.candidates = int(cand.size());
+  if (!cand.empty()) {
+    // Relative weights: 1 at the median, so that Huber's scale stays in degrees.
+    std::vector<double> w;
+    for (const Match& m : cand) w.push_back(m.weight);
+    std::nth_element(w.begin(), w.begin() + w.size() / 2, w.end());
+    for (Match& m : cand) m.weight /= w[w.size() / 2];
+  }
+  const int n_par = model.params();
+  const Eigen::VectorXd x0 = Eigen::VectorXd::Zero(n_par);
+  std::vector<int> all(cand.size());
+  std::iota(all.begin(), all.end(), 0);
+  const double thr = config.ransac_threshold_deg * kDeg;
+  const std::vector<int> inliers_before = inliersOf(model, cand, x0, thr);
+  Eigen::VectorXd x = x0;
+  std::vector<int> best;
+  if (int(cand.size()) >= std::max(config.min_inliers, n_par)) best = robustFit(model, cand, all, config, rng, &x);
+  out.inliers = int(best.size());
+  if (out.inliers < config.min_inliers) {
+    out.message = std::to_string(out.candidates) + " candidate matches, " + std::to_string(out.inliers) +
+                  " inliers; need " + std::to_string(config.min_inliers) + " inliers";
+    out.rms_before_deg = out.rms_after_deg = rmsOf(model, cand, inliers_before, x0) / kDeg;
+    return out;
+  }
+  out.rms_before_deg = rmsOf(model, cand, best, x0) / kDeg;
+  out.rms_after_deg = rmsOf(model, cand, best, x) / kDeg;
+  const Eigen::Matrix3d dR = expSo3(x.head<3>());
+  const Eigen::AngleAxisd aa(dR);
+  out.correction_deg = aa.angle() / kDeg;
+  out.correction_axis = aa.angle() > 0 ? aa.axis() : Eigen::Vector3d::Zero();
+  const double sig = significance(model, cand, best, x);
+  out.standard_error_deg = sig > 0 ? x.norm() / sig / kDeg : INFINITY;
+
+  // Held out: each half of the candidates (alternate matches) fitted on its
+  // own and scored on the other half, against the calibration's score there.
+  const double tau = config.heldout_truncation_deg * kDeg;
+  std::vector<int> half[2];
+  for (int i = 0; i < int(cand.size()); ++i) half[i % 2].push_back(i);
+  double before = 0, after = 0;
+  bool both_better = true;
+  for (int k = 0; k < 2; ++k) {
+    Eigen::VectorXd xk = x0;
+    robustFit(model, cand, half[k], config, rng, &xk, false);
+    const double b = truncatedRms(model, cand, half[1 - k], x0, tau);
+    const double a = truncatedRms(model, cand, half[1 - k], xk, tau);
+    before += 0.5 * b, after += 0.5 * a;
+    if (!(a < b)) both_better = false;
+  }
+  out.heldout_before_deg = before / kDeg;
+  out.heldout_after_deg = after / kDeg;
+  std::ostringstream why;
+  why.precision(4);
+  if (!both_better) {
+    out.status = CameraRefinement::Status::kNotImproved;
+    why << "held-out residual not lower in both halves (" << out.heldout_before_deg << " -> "
+        << out.heldout_after_deg << " deg)";
+    out.message = why.str();
+    return out;
+  }
+  if (sig < config.min_significance) {
+    out.status = CameraRefinement::Status::kNotImproved;
+    why << "correction " << out.correction_deg << " deg is within " << config.min_significance
+        << " standard errors (" << out.standard_error_deg << " deg)";
+    out.message = why.str();
+    return out;
+  }
+  out.status = CameraRefinement::Status::kApplied;
+  out.correction = dR;
+  Eigen::Isometry3d T_new = T_ref_cam;
+  T_new.linear() = model.rotation(x);
+  T_new.translation() = model.direction(x) * t0.norm();
+  out.translation_change_deg = std::acos(std::clamp(model.direction(x).dot(t_dir), -1.0, 1.0)) / kDeg;
+  *T_estimated = T_new;
+  return out;
+}
+
 RigRefinementResult refineRig(const Rig& rig, int reference, const std::vector<std::vector<cv::Mat>>& frame_sets,
                               const std::vector<cv::Mat>& self_masks, const RigRefinementConfig& config) {
   config.validate();
@@ -317,17 +701,14 @@ RigRefinementResult refineRig(const Rig& rig, int reference, const std::vector<s
   }
   require(self_masks.empty() || int(self_masks.size()) == n_cams, "self_masks",
           "need none or one per camera (" + std::to_string(n_cams) + "), got " + std::to_string(self_masks.size()));
-  // Where features may be detected: outside the self-mask.
-  std::vector<cv::Mat> detect_mask(n_cams);
-  for (int c = 0; c < n_cams; ++c) {
-    const RigCamera& cam = rig.cameras[c];
-    if (self_masks.empty() || self_masks[c].empty()) continue;
+  for (int c = 0; c < n_cams && !self_masks.empty(); ++c) {
     const cv::Mat& m = self_masks[c];
+    const RigCamera& cam = rig.cameras[c];
+    if (m.empty()) continue;
     require(m.type() == CV_8UC1, "self-mask of " + cam.name, "must be 8-bit single-channel (CV_8UC1)");
     require(m.cols == cam.model.width() && m.rows == cam.model.height(), "self-mask of " + cam.name,
             "is " + sizeText(m) + ", calibration says " + std::to_string(cam.model.width()) + "x" +
                 std::to_string(cam.model.height()));
-    detect_mask[c] = m == 0;
   }
   RigRefinementResult result;
   result.rig = rig;
@@ -337,227 +718,30 @@ RigRefinementResult refineRig(const Rig& rig, int reference, const std::vector<s
     result.cameras[c].camera = c;
     result.cameras[c].name = rig.cameras[c].name;
   }
-
-  // Calibrated pose of each camera relative to the reference.
-  const Eigen::Isometry3d T_base_ref = rig.cameras[reference].T_base_cam;
-  std::vector<Eigen::Isometry3d> T_ref(n_cams);
-  for (int c = 0; c < n_cams; ++c) {
-    T_ref[c] = T_base_ref.inverse() * rig.cameras[c].T_base_cam;
-    if (c != reference)
-      require(T_ref[c].translation().norm() > 1e-6, rig.cameras[c].name, "has no baseline to the reference camera");
-  }
-
-  // Features come from the reference image and from each support image,
-  // resampled (warp_support) into the reference camera's geometry through the
-  // calibrated rotation: patches then look alike in both, whatever the
-  // cameras' yaw, and only parallax separates them. feature_mask: where
-  // features may lie (outside self-masks, inside the resampled view).
-  const CameraModel& ref_model = rig.cameras[reference].model;
-  const auto geometry = [&](int c) -> const CameraModel& {
-    return config.warp_support ? ref_model : rig.cameras[c].model;
-  };
-  std::vector<cv::Mat> map_x(n_cams), map_y(n_cams), feature_mask = detect_mask;
-  if (config.warp_support) {
-    const std::vector<Eigen::Vector3f> rays = pixelRays(ref_model);
-    const int w = ref_model.width(), h = ref_model.height();
-    for (int c = 0; c < n_cams; ++c) {
-      if (c == reference) continue;
-      const CameraModel& model = rig.cameras[c].model;
-      const Eigen::Matrix3f R_cam_ref = T_ref[c].linear().transpose().cast<float>();
-      map_x[c].create(h, w, CV_32FC1);
-      map_y[c].create(h, w, CV_32FC1);
-      cv::Mat valid(h, w, CV_8UC1);
-      for (int v = 0; v < h; ++v) {
-        for (int u = 0; u < w; ++u) {
-          const Eigen::Vector3f& r = rays[size_t(v) * w + u];
-          Eigen::Vector2d uv;
-          const bool ok = r.allFinite() && model.project((R_cam_ref * r).cast<double>(), &uv) &&
-                          model.isInImage(uv, 1.0) &&
-                          (detect_mask[c].empty() || detect_mask[c].at<uint8_t>(int(std::lround(uv.y())),
-                                                                              int(std::lround(uv.x()))) != 0);
-          map_x[c].at<float>(v, u) = ok ? float(uv.x()) : -1.0f;
-          map_y[c].at<float>(v, u) = ok ? float(uv.y()) : -1.0f;
-          valid.at<uint8_t>(v, u) = ok ? 255 : 0;
-        }
-      }
-      // Keep ORB's and KLT's windows off the border of the resampled view.
-      cv::erode(valid, feature_mask[c], cv::getStructuringElement(cv::MORPH_RECT, cv::Size(33, 33)));
-    }
-  }
-  const auto masked = [&](int c, const cv::Point2f& p) {
-    if (feature_mask[c].empty()) return false;
-    const int u = int(std::lround(p.x)), v = int(std::lround(p.y));
-    if (u < 0 || v < 0 || u >= feature_mask[c].cols || v >= feature_mask[c].rows) return true;
-    return feature_mask[c].at<uint8_t>(v, u) == 0;
-  };
-
   // Matches per support camera, pooled over the frame sets.
+  RigMatcher matcher(config, self_masks);
   std::vector<std::vector<Match>> pooled(n_cams);
   std::vector<int> raw_matches(n_cams, 0);
   for (const auto& set : frame_sets) {
-    // The images features are taken from: each support image resampled into
-    // the reference geometry, or as recorded.
-    std::vector<cv::Mat> image(n_cams);
+    std::vector<int> raw;
+    const auto found = matcher.match(rig, reference, set, &raw);
     for (int c = 0; c < n_cams; ++c) {
-      if (!config.warp_support || c == reference) image[c] = set[c];
-      else cv::remap(set[c], image[c], map_x[c], map_y[c], cv::INTER_LINEAR, cv::BORDER_CONSTANT);  // new buffer
+      pooled[c].insert(pooled[c].end(), found[c].begin(), found[c].end());
+      raw_matches[c] += raw[c];
     }
-    std::vector<Features> feats(n_cams);
-#pragma omp parallel for schedule(dynamic)
-    for (int c = 0; c < n_cams; ++c) {
-      auto orb = cv::ORB::create(config.max_features, 1.2f, config.pyramid_levels, 31, 0, 2, cv::ORB::HARRIS_SCORE,
-                                 31, 10);
-      orb->detectAndCompute(image[c], feature_mask[c].empty() ? cv::noArray() : cv::InputArray(feature_mask[c]),
-                            feats[c].keypoints, feats[c].descriptors);
-      feats[c].rays = bearings(geometry(c), feats[c].keypoints);
-    }
-    std::vector<std::vector<Match>> found(n_cams);
-#pragma omp parallel for schedule(dynamic)
-    for (int c = 0; c < n_cams; ++c) {
-      if (c == reference) continue;
-      // Warped features are rays of the reference frame: R = I for the epipolar window.
-      const Eigen::Matrix3d R_match =
-          config.warp_support ? Eigen::Matrix3d::Identity() : Eigen::Matrix3d(T_ref[c].linear());
-      const auto dm = matchGuided(feats[reference], feats[c], R_match, T_ref[c].translation().normalized(),
-                                  config.max_initial_residual_deg * kDeg, config.ratio, config.max_hamming);
-      raw_matches[c] += int(dm.size());
-      std::vector<cv::Point2f> p_ref, p_cam;
-      for (const auto& [i, j] : dm) {
-        p_ref.push_back(feats[reference].keypoints[i].pt);
-        p_cam.push_back(feats[c].keypoints[j].pt);
-      }
-      std::vector<uint8_t> ok(p_ref.size(), 1);
-      if (config.subpixel && !p_ref.empty()) {
-        // The support keypoint moved to where the reference patch fits best.
-        std::vector<cv::Point2f> refined = p_cam;
-        std::vector<float> err;
-        cv::calcOpticalFlowPyrLK(image[reference], image[c], p_ref, refined, ok, err,
-                                 cv::Size(config.klt_window, config.klt_window), 1,
-                                 cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 30, 0.005),
-                                 cv::OPTFLOW_USE_INITIAL_FLOW);
-        for (size_t i = 0; i < refined.size(); ++i) {
-          if (ok[i] && cv::norm(refined[i] - p_cam[i]) < 3.0) p_cam[i] = refined[i];
-          else ok[i] = 0;
-        }
-      }
-      const CameraModel& m_ref = rig.cameras[reference].model;
-      const CameraModel& m_cam = rig.cameras[c].model;
-      const Eigen::Matrix3d R_cam_ref = T_ref[c].linear().transpose();
-      for (size_t i = 0; i < p_ref.size(); ++i) {
-        if (!ok[i] || masked(reference, p_ref[i]) || masked(c, p_cam[i])) continue;
-        Match m;
-        if (!m_ref.unproject(Eigen::Vector2d(p_ref[i].x, p_ref[i].y), &m.f_ref)) continue;
-        if (!geometry(c).unproject(Eigen::Vector2d(p_cam[i].x, p_cam[i].y), &m.f_cam)) continue;
-        m.f_ref.normalize(), m.f_cam.normalize();
-        // A warped pixel's ray is the support camera's ray rotated by the calibration.
-        if (config.warp_support) m.f_cam = R_cam_ref * m.f_cam;
-        if (config.weight_by_resolution) {
-          // Pixel noise in both images as an angle: 1/s0^2 + 1/s1^2.
-          const double s0 = pixelsPerRadian(m_ref, m.f_ref), s1 = pixelsPerRadian(m_cam, m.f_cam);
-          if (!(s0 > 0 && s1 > 0)) continue;
-          m.weight = 1.0 / (1.0 / (s0 * s0) + 1.0 / (s1 * s1));
-        }
-        found[c].push_back(m);
-      }
-    }
-    for (int c = 0; c < n_cams; ++c) pooled[c].insert(pooled[c].end(), found[c].begin(), found[c].end());
   }
-
   std::mt19937_64 rng(config.seed);
+  const Eigen::Isometry3d T_base_ref = rig.cameras[reference].T_base_cam;
   for (int c = 0; c < n_cams; ++c) {
-    CameraRefinement& out = result.cameras[c];
     if (c == reference) continue;
-    out.matches = raw_matches[c];
-    const Eigen::Isometry3d& T_ref_cam = T_ref[c];
-    const Eigen::Vector3d t0 = T_ref_cam.translation();
-    const EpipolarModel model(T_ref_cam.linear(), t0, config.refine_translation);
-    const Eigen::Vector3d t_dir = t0.normalized();
-    const Eigen::Matrix3d R0 = T_ref_cam.linear();
-
-    // Candidates: near the epipolar plane at the calibration, away from the
-    // epipoles, and in front of both cameras (or too distant to tell).
-    std::vector<Match> cand;
-    const double min_sin = std::sin(2.0 * kDeg);
-    for (const Match& m : pooled[c]) {
-      const Eigen::Vector3d g = R0 * m.f_cam;
-      if (t_dir.cross(m.f_ref).norm() < min_sin || t_dir.cross(g).norm() < min_sin) continue;
-      if (std::abs(EpipolarModel::residual(R0, t_dir, m)) > config.max_initial_residual_deg * kDeg) continue;
-      if (std::acos(std::clamp(m.f_ref.dot(g), -1.0, 1.0)) > 1.0 * kDeg) {
-        // lambda_ref f_ref - lambda_cam g = t in the least-squares sense.
-        Eigen::Matrix<double, 3, 2> A;
-        A << m.f_ref, -g;
-        const Eigen::Vector2d lambda = (A.transpose() * A).ldlt().solve(A.transpose() * t0);
-        if (!(lambda.x() > 0 && lambda.y() > 0)) continue;
-      }
-      cand.push_back(m);
-    }
-    out.candidates = int(cand.size());
-    if (!cand.empty()) {
-      // Relative weights: 1 at the median, so that Huber's scale stays in degrees.
-      std::vector<double> w;
-      for (const Match& m : cand) w.push_back(m.weight);
-      std::nth_element(w.begin(), w.begin() + w.size() / 2, w.end());
-      for (Match& m : cand) m.weight /= w[w.size() / 2];
-    }
-    const int n_par = model.params();
-    const Eigen::VectorXd x0 = Eigen::VectorXd::Zero(n_par);
-    const double thr = config.ransac_threshold_deg * kDeg;
-    const std::vector<int> inliers_before = inliersOf(model, cand, x0, thr);
-    std::vector<int> best;
-    Eigen::VectorXd x = x0;
-    if (int(cand.size()) >= std::max(config.min_inliers, n_par)) {
-      // RANSAC: rotation (and direction) from minimal samples, started at the calibration.
-      best = inliers_before;
-      std::uniform_int_distribution<int> pick(0, int(cand.size()) - 1);
-      for (int it = 0; it < config.ransac_iterations; ++it) {
-        std::vector<int> sample;
-        while (int(sample.size()) < n_par) {
-          const int i = pick(rng);
-          if (std::find(sample.begin(), sample.end(), i) == sample.end()) sample.push_back(i);
-        }
-        Eigen::VectorXd xs = x0;
-        if (!gaussNewton(model, cand, sample, 0.0, 8, &xs)) continue;
-        if (xs.head<3>().norm() > 2 * config.max_initial_residual_deg * kDeg) continue;
-        std::vector<int> in = inliersOf(model, cand, xs, thr);
-        if (in.size() > best.size()) best.swap(in);
-      }
-      // Huber Gauss-Newton on the inliers, then once more on the inliers of the fit.
-      for (int round = 0; round < 3 && int(best.size()) >= n_par; ++round) {
-        Eigen::VectorXd xr = x;
-        if (!gaussNewton(model, cand, best, config.huber_deg * kDeg, config.max_iterations, &xr)) break;
-        x = xr;
-        std::vector<int> in = inliersOf(model, cand, x, thr);
-        if (in == best) break;
-        best.swap(in);
-      }
-    }
-    out.inliers = int(best.size());
-    if (out.inliers < config.min_inliers) {
-      out.status = CameraRefinement::Status::kTooFewInliers;
-      out.message = std::to_string(out.candidates) + " candidate matches, " + std::to_string(out.inliers) +
-                    " inliers; need " + std::to_string(config.min_inliers) + " inliers";
-      out.rms_before_deg = out.rms_after_deg = rmsOf(model, cand, inliers_before, x0) / kDeg;
-      continue;
-    }
-    out.rms_before_deg = rmsOf(model, cand, best, x0) / kDeg;
-    out.rms_after_deg = rmsOf(model, cand, best, x) / kDeg;
-    const Eigen::Matrix3d dR = expSo3(x.head<3>());
-    const Eigen::AngleAxisd aa(dR);
-    if (out.rms_after_deg >= out.rms_before_deg || best.size() < inliers_before.size()) {
-      out.status = CameraRefinement::Status::kNotImproved;
-      out.message = "the fit does not lower the residual or loses inliers";
-      continue;
-    }
-    out.status = CameraRefinement::Status::kApplied;
-    out.correction = dR;
-    out.correction_deg = aa.angle() / kDeg;
-    out.correction_axis = aa.angle() > 0 ? aa.axis() : Eigen::Vector3d::Zero();
-    Eigen::Isometry3d T_new = T_ref_cam;
-    T_new.linear() = model.rotation(x);
-    T_new.translation() = model.direction(x) * t0.norm();
-    out.translation_change_deg =
-        std::acos(std::clamp(model.direction(x).dot(t_dir), -1.0, 1.0)) / kDeg;
-    result.rig = withRelativePose(result.rig, reference, c, T_new);
+    Eigen::Isometry3d T_new;
+    CameraRefinement r =
+        estimateCameraCorrection(pooled[c], T_base_ref.inverse() * rig.cameras[c].T_base_cam, config, rng, &T_new);
+    r.camera = c;
+    r.name = rig.cameras[c].name;
+    r.matches = raw_matches[c];
+    if (r.status == CameraRefinement::Status::kApplied) result.rig = withRelativePose(result.rig, reference, c, T_new);
+    result.cameras[c] = r;
   }
   return result;
 }

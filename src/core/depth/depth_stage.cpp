@@ -19,7 +19,8 @@ const ParamTable<DepthStageConfig>& DepthStageConfig::params() {
                "Supporting cameras by name; empty: every other camera of the rig")
         .table("self_masks", [](C& c) -> std::map<std::string, std::string>& { return c.self_masks; },
                "Camera name -> 8-bit mask image (0 where the camera sees the car itself: never matched)")
-        .include(PlaneSweepConfig::params(), [](C& c) -> PlaneSweepConfig& { return c.sweep; });
+        .include(PlaneSweepConfig::params(), [](C& c) -> PlaneSweepConfig& { return c.sweep; })
+        .include(SelfCalibrationConfig::params(), [](C& c) -> SelfCalibrationConfig& { return c.self_calibration; });
     t.rule([](const C& c) {
       if (c.reference_camera.empty()) throw std::invalid_argument("reference_camera: empty camera name");
       for (const auto& n : c.support_cameras) {
@@ -61,6 +62,23 @@ DepthStage::DepthStage(Rig rig, const DepthStageConfig& config) : rig_(std::move
     if (masks_[i].empty()) throw CalibrationError("~self_masks: cannot read " + path);
   }
   sweep_ = std::make_unique<PlaneSweep>(config.sweep);
+  if (config.self_calibration.enabled && !supports_.empty()) {
+    // The calibrator's masks mark the car body (non-zero), the stage's the scene.
+    std::vector<cv::Mat> body(masks_.size());
+    for (size_t i = 0; i < masks_.size(); ++i)
+      if (!masks_[i].empty()) body[i] = masks_[i] == 0;
+    try {
+      calibration_ = std::make_unique<OnlineRigCalibrator>(rig_, ref_, supports_, body, config.self_calibration);
+    } catch (const std::invalid_argument& e) {
+      throw CalibrationError(std::string("self-calibration: ") + e.what());
+    }
+    rig_ = calibration_->rig();  // corrected from the start when started from a saved calibration
+  }
+}
+
+void DepthStage::saveCalibration(const std::string& camchain_path) const {
+  if (!calibration_) throw std::runtime_error("self-calibration is off (~self_calibration false): nothing to save");
+  calibration_->saveCalibration(camchain_path);
 }
 
 void DepthStage::setSweepConfig(const PlaneSweepConfig& config) {
@@ -74,6 +92,11 @@ DepthResult DepthStage::compute(const std::vector<cv::Mat>& images) {
                                 std::to_string(rig_.cameras.size()) + " cameras");
   if (images[ref_].empty())
     throw std::invalid_argument("frame set has no image of the reference camera " + rig_.cameras[ref_].name);
+  double calibration_ms = 0.0;
+  if (calibration_) {
+    if (calibration_->observe(images)) rig_ = calibration_->rig();
+    calibration_ms = calibration_->lastCallMs();
+  }
   const SweepView ref = rigSweepView(rig_, ref_, ref_, images[ref_], masks_[ref_]);
   std::vector<SweepView> views;
   std::vector<std::string> missing;
@@ -87,6 +110,8 @@ DepthResult DepthStage::compute(const std::vector<cv::Mat>& images) {
   const Eigen::Isometry3d T_base_ref = rig_.cameras[ref_].T_base_cam;
   DepthResult r = sweep_->compute(ref, views, &T_base_ref);
   r.warnings.insert(r.warnings.end(), missing.begin(), missing.end());
+  r.calibration_ms = calibration_ms;
+  r.total_ms += calibration_ms;
   return r;
 }
 

@@ -19,13 +19,24 @@
 // (angle of each ray to the epipolar plane, symmetric in both rays). Distant
 // points constrain R directly; the known translation fixes the rest.
 //
-// Residuals are angles in degrees. A camera with too few inliers, or whose RMS
-// residual over its inliers does not improve, keeps its calibration: the
-// result is never worse than the input.
+// Residuals are angles in degrees. A camera with too few inliers keeps its
+// calibration. Whether the fit is better is decided without favouring the
+// calibration being corrected (the matches were found in images resampled with
+// it, so counting inliers at a fixed threshold would): two-fold
+// cross-validation, each half's fit scored on the other half's matches by a
+// truncated RMS residual (heldout_truncation_deg) against the calibration's
+// score on the same matches; both halves must improve, and the correction must
+// exceed its own standard error (significance) - else the camera keeps its
+// calibration.
+//
+// The pieces are used on their own by the online self-calibration
+// (online_calibration.h): RigMatcher gathers one frame set's matches,
+// estimateCameraCorrection fits one camera.
 #ifndef FISHEYE_MAPPING_CORE_CAMERA_RIG_REFINEMENT_H_
 #define FISHEYE_MAPPING_CORE_CAMERA_RIG_REFINEMENT_H_
 
 #include <cstdint>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -53,6 +64,12 @@ struct RigRefinementConfig {
   int max_iterations = 30;          // Gauss-Newton iterations
   bool refine_translation = false;  // also the translation direction (baseline length kept)
   uint64_t seed = 1;                // RANSAC sampling
+  // Held-out test: residuals beyond this count as this much (outliers weigh
+  // the same under any calibration).
+  double heldout_truncation_deg = 1.0;
+  // The correction must exceed this many standard errors (from the fit's
+  // normal equations and residual spread) to be applied.
+  double min_significance = 4.0;
   // Throws std::invalid_argument naming the field.
   void validate() const;
 };
@@ -62,7 +79,7 @@ struct CameraRefinement {
     kReference,     // the reference camera itself
     kApplied,       // corrected
     kTooFewInliers, // fewer than min_inliers: unchanged
-    kNotImproved,   // the fit did not lower the residual: unchanged
+    kNotImproved,   // the fit did not lower the held-out residual, or is not significant: unchanged
   };
   int camera = -1;
   std::string name;
@@ -75,6 +92,9 @@ struct CameraRefinement {
   double correction_deg = 0.0;    // angle of the estimated rotation correction
   Eigen::Vector3d correction_axis = Eigen::Vector3d::Zero();  // in the camera's frame
   double translation_change_deg = 0.0;  // angle between old and new translation direction
+  double heldout_before_deg = 0.0;  // held-out truncated RMS residual, calibration (mean of both halves)
+  double heldout_after_deg = 0.0;   // the same of each half's fit
+  double standard_error_deg = 0.0;  // of the correction's angle
   // R_ref_cam(refined) = R_ref_cam(calibrated) * correction (camera frame).
   Eigen::Matrix3d correction = Eigen::Matrix3d::Identity();
   std::string message;            // why a camera was left unchanged
@@ -99,6 +119,55 @@ RigRefinementResult refineRig(const Rig& rig, int reference,
                               const std::vector<std::vector<cv::Mat>>& frame_sets,
                               const std::vector<cv::Mat>& self_masks = {},
                               const RigRefinementConfig& config = {});
+
+// One correspondence between the reference camera and a support camera: unit
+// bearings in each camera's own frame (they do not depend on the extrinsics,
+// so matches gathered under one calibration stay valid under another), and
+// the inverse variance of its residual, relative.
+struct EpipolarMatch {
+  Eigen::Vector3d f_ref, f_cam;
+  double weight = 1.0;
+};
+
+// Feature matches of frame sets between a rig's reference camera and its
+// support cameras (the first half of refineRig). Keeps the resampling maps of
+// each support camera and makes them anew only when the rig's rotation of that
+// camera moved by more than 0.25 degrees (the maps only need to make patches
+// look alike) or its model changed.
+class RigMatcher {
+ public:
+  // self_masks: none, or one per camera (empty or CV_8UC1, non-zero = car
+  // body: no features), of the calibrated size (checked by match()).
+  explicit RigMatcher(const RigRefinementConfig& config, std::vector<cv::Mat> self_masks = {});
+  // Matches of one frame set per rig camera (empty for the reference and for
+  // cameras whose image is empty). images: CV_8UC1 of the calibrated sizes (a
+  // support camera's may be empty: skipped). raw: mutual feature matches
+  // before subpixel refinement and masking, per camera. Throws
+  // std::invalid_argument naming the camera for a wrong image.
+  std::vector<std::vector<EpipolarMatch>> match(const Rig& rig, int reference, const std::vector<cv::Mat>& images,
+                                                std::vector<int>* raw = nullptr);
+
+ private:
+  struct Warp {
+    Eigen::Matrix3d R_ref_cam = Eigen::Matrix3d::Zero();
+    int width = 0, height = 0;
+    cv::Mat map_x, map_y, feature_mask;
+  };
+  const Warp& warpFor(const Rig& rig, int reference, int c);
+  RigRefinementConfig config_;
+  std::vector<cv::Mat> self_masks_;
+  std::vector<cv::Mat> detect_masks_;  // per camera: non-zero where features may lie (outside the self-mask)
+  std::vector<Warp> warps_;
+  int warp_reference_ = -1;
+};
+
+// Fits one support camera's pose relative to the reference, T_ref_cam (the
+// rig's current), to matches; the result's status says whether it is applied
+// (kApplied: *T_estimated is the new pose; else *T_estimated = T_ref_cam).
+// `camera`/`name` only label the result. rng: RANSAC sampling.
+CameraRefinement estimateCameraCorrection(const std::vector<EpipolarMatch>& matches, const Eigen::Isometry3d& T_ref_cam,
+                                          const RigRefinementConfig& config, std::mt19937_64& rng,
+                                          Eigen::Isometry3d* T_estimated);
 
 // The rig with camera `camera`'s pose relative to `reference` replaced by
 // T_ref_cam; every camera's T_cam0_cam / T_base_cam stay consistent (cam0 may

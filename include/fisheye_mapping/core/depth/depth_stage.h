@@ -12,6 +12,7 @@
 
 #include <opencv2/core.hpp>
 
+#include "fisheye_mapping/core/camera/online_calibration.h"
 #include "fisheye_mapping/core/camera/rig.h"
 #include "fisheye_mapping/core/common/params.h"
 #include "fisheye_mapping/core/depth/plane_sweep.h"
@@ -26,6 +27,8 @@ struct DepthStageConfig {
   // car itself; those pixels are never matched).
   std::map<std::string, std::string> self_masks;
   PlaneSweepConfig sweep;
+  // Online rotation self-calibration of the supporting cameras (on by default).
+  SelfCalibrationConfig self_calibration;
   // Throws std::invalid_argument naming the parameter.
   void validate() const;
   // The declaration of every parameter, the sweep's included (docs/parameters.md).
@@ -45,7 +48,10 @@ class DepthStage {
   DepthStage(Rig rig, const DepthStageConfig& config);
 
   // Depth (range along the reference camera's rays, metres, NaN invalid) for
-  // one frame set: images[i] is the image of rig camera i (grey or BGR, 8/16
+  // one frame set. With self-calibration on, the set first goes to the online
+  // calibrator (every self_calibration_period-th set it updates the supporting
+  // cameras' rotations, which this and later sets are swept with; its time is
+  // DepthResult::calibration_ms, part of total_ms). images: images[i] is the image of rig camera i (grey or BGR, 8/16
   // bit or float); a missing supporting image (empty Mat) is left out and
   // named in DepthResult::warnings; a missing reference image throws
   // std::invalid_argument. Not thread-safe (one call at a time).
@@ -59,7 +65,13 @@ class DepthStage {
   // and then keeps the running sweep.
   void setSweepConfig(const PlaneSweepConfig& config);
 
+  // The rig the sweep uses: the given one with the self-calibration's corrections.
   const Rig& rig() const { return rig_; }
+  // The online self-calibration, or null when it is off.
+  const OnlineRigCalibrator* selfCalibration() const { return calibration_.get(); }
+  // Writes the self-calibrated rig (OnlineRigCalibrator::saveCalibration);
+  // throws std::runtime_error when self-calibration is off or writing fails.
+  void saveCalibration(const std::string& camchain_path) const;
   int reference() const { return ref_; }
   const std::vector<int>& supports() const { return supports_; }
   const PlaneSweepConfig& sweepConfig() const { return sweep_->config(); }
@@ -71,6 +83,7 @@ class DepthStage {
   std::vector<int> supports_;
   std::vector<cv::Mat> masks_;  // per rig camera; empty: none
   std::unique_ptr<PlaneSweep> sweep_;
+  std::unique_ptr<OnlineRigCalibrator> calibration_;
 };
 
 }  // namespace fisheye_mapping

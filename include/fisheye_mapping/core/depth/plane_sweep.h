@@ -178,6 +178,7 @@ struct DepthResult {
   double sweep_ms = 0.0;   // all scales, including transfers
   double filter_ms = 0.0;
   double total_ms = 0.0;
+  double calibration_ms = 0.0;  // DepthStage: the online self-calibration's update in this call (0: none)
 };
 
 // The planes of a sweep. Without T_base_ref (reference camera -> base frame)

@@ -1,0 +1,153 @@
+// Online rotation self-calibration (issue 26): keeps each supporting camera's
+// rotation relative to the reference camera right while driving, from the
+// frame sets the depth stage sweeps anyway. No ROS.
+//
+// Every `period`-th frame set, the rig's matcher (RigMatcher, the first half of
+// refine_rig) gathers feature matches between the reference and each support
+// camera; a match is a pair of bearings in the cameras' own frames, so it stays
+// valid whatever rotation is applied later. Per camera:
+//  1. the newest frame set's matches are fitted alone (estimateCameraCorrection:
+//     RANSAC, Huber Gauss-Newton, held-out acceptance). When that fit is
+//     applied and needs more than `change_deg` from the current rotation, the
+//     older matches no longer describe the camera (it was knocked, or the
+//     calibration is still far off): the pool restarts from the newest set;
+//  2. the pool (the last `window` sampled frame sets) is fitted; the fit is
+//     applied only if it passes the held-out test (scored on matches it was
+//     not fitted to, against the current rotation's score on them: no bias
+//     toward the current calibration) and is significant;
+//  3. a correction whose total from the given calibration exceeds
+//     `max_correction_deg` is refused and reported, never applied;
+//  4. applied smoothly: the current rotation moves a fraction `gain` of the
+//     way to the fit (R <- R exp(gain log(R^T R_fit))).
+// A camera whose image is missing, black or flat (night, lens cap), or frozen
+// (the same image as at the last update while the reference image changed)
+// gets no update and a warning naming it; the others go on. A static car (the
+// reference image as at the last update) brings no new evidence: no update,
+// reported as such.
+#ifndef FISHEYE_MAPPING_CORE_CAMERA_ONLINE_CALIBRATION_H_
+#define FISHEYE_MAPPING_CORE_CAMERA_ONLINE_CALIBRATION_H_
+
+#include <deque>
+#include <random>
+#include <string>
+#include <vector>
+
+#include <Eigen/Geometry>
+#include <opencv2/core.hpp>
+
+#include "fisheye_mapping/core/camera/rig.h"
+#include "fisheye_mapping/core/camera/rig_refinement.h"
+
+namespace fisheye_mapping {
+
+template <typename Config>
+class ParamTable;
+
+struct SelfCalibrationConfig {
+  bool enabled = true;               // self_calibration
+  int period = 5;                    // self_calibration_period: frame sets from one update to the next
+  int window = 4;                    // self_calibration_window: sampled frame sets whose matches are pooled
+  double max_correction_deg = 2.0;   // self_calibration_max_correction_deg: from the given calibration
+  int min_inliers = 150;             // self_calibration_min_inliers: minimum evidence of a fit
+  double gain = 0.6;                 // self_calibration_gain: fraction of a fit applied per update
+  double change_deg = 0.15;          // self_calibration_change_deg: the newest set alone needing more restarts the pool
+  int max_features = 3000;           // self_calibration_features: ORB keypoints per image
+  std::string start_file;            // self_calibration_start: a camchain saved by a previous run
+  // Throws std::invalid_argument naming the parameter.
+  void validate() const;
+  // The declarations (included by DepthStageConfig's table).
+  static const ParamTable<SelfCalibrationConfig>& params();
+  // The matcher and estimator settings these stand for.
+  RigRefinementConfig refinement() const;
+};
+
+struct CameraCalibrationState {
+  int camera = -1;
+  std::string name;
+  bool reference = false;
+  bool warn = false;                  // no update for a reason the user should see
+  std::string status;                 // one line: "converged", "correcting", "warming up", or why not updated
+  Eigen::Vector3d correction_rotvec_deg = Eigen::Vector3d::Zero();  // applied, from the given calibration, camera frame
+  double correction_deg = 0.0;        // its angle
+  double residual_deg = 0.0;          // RMS angular epipolar residual over the last fit's inliers, current rotation
+  double last_fit_deg = 0.0;          // the last fit's correction from the then current rotation
+  int inliers = 0;                    // of the last fit
+  int pooled_matches = 0;
+  int updates = 0;                    // fits applied
+  int refused = 0;                    // fits above max_correction_deg
+  int restarts = 0;                   // pool restarts (a knock, or still far off)
+};
+
+class OnlineRigCalibrator {
+ public:
+  // given: the calibration as given; supports: rig indices of the cameras to
+  // keep right (not the reference); self_masks: none or one per camera
+  // (non-zero = car body, never matched). Throws std::invalid_argument naming
+  // the parameter. A config.start_file that cannot be used (missing, corrupt,
+  // of another rig) is not an error: the calibrator starts from `given` and
+  // startError() says why.
+  OnlineRigCalibrator(const Rig& given, int reference, std::vector<int> supports, std::vector<cv::Mat> self_masks,
+                      const SelfCalibrationConfig& config);
+
+  // One frame set (images[i]: rig camera i; grey or BGR, 8/16 bit or float in
+  // [0, 1]; empty: not in the set). Every period-th call updates. True when
+  // the rig changed.
+  bool observe(const std::vector<cv::Mat>& images);
+
+  const Rig& rig() const { return rig_; }
+  const Rig& givenRig() const { return given_; }
+  int reference() const { return ref_; }
+  const std::vector<CameraCalibrationState>& state() const { return state_; }
+  // Why the last update brought nothing new ("" if it did): a static car.
+  const std::string& lastNote() const { return note_; }
+  int frameSets() const { return frame_sets_; }
+  int updates() const { return updates_; }
+  double lastUpdateMs() const { return last_ms_; }
+  // Time of the last observe() call (0 when it did not update).
+  double lastCallMs() const { return last_call_ms_; }
+  // Why self_calibration_start could not be used ("" if it was, or none was
+  // given): the calibrator then started from the given calibration.
+  const std::string& startError() const { return start_error_; }
+  const SelfCalibrationConfig& config() const { return config_; }
+  double totalMs() const { return total_ms_; }
+  // Whether any correction has been applied since the start (or the start file).
+  bool changed() const { return changed_; }
+
+  // Starts from a rig saved by saveCalibration: its rotations of the support
+  // cameras relative to the reference replace the current ones. Throws
+  // CalibrationError naming the file and what does not fit the given rig
+  // (other cameras, intrinsics, baselines, a correction above the maximum);
+  // then nothing changes.
+  void startFrom(const std::string& camchain_path);
+  // Writes the current rig as a Kalibr camchain at camchain_path and its mount
+  // beside it (savedMountPath), each through a temporary file renamed over the
+  // target; an existing camchain/mount is kept as <name>.1. Throws
+  // std::runtime_error naming the file.
+  void saveCalibration(const std::string& camchain_path) const;
+  static std::string savedMountPath(const std::string& camchain_path);
+
+ private:
+  void update(const std::vector<cv::Mat>& grey);
+  void applyRotation(int c, const Eigen::Matrix3d& R_ref_cam);
+  Eigen::Isometry3d relative(const Rig& rig, int c) const;
+
+  Rig given_, rig_;
+  int ref_;
+  std::vector<int> supports_;
+  SelfCalibrationConfig config_;
+  RigRefinementConfig refinement_;
+  RigMatcher matcher_;
+  std::mt19937_64 rng_;
+  std::vector<std::deque<std::vector<EpipolarMatch>>> pools_;  // per camera, newest last
+  std::vector<cv::Mat> last_thumbs_;                           // per camera, at the last update
+  std::vector<CameraCalibrationState> state_;
+  std::string note_;
+  int frame_sets_ = 0, updates_ = 0;
+  double last_ms_ = 0.0, total_ms_ = 0.0, last_call_ms_ = 0.0;
+  std::string start_error_;
+  bool changed_ = false;
+};
+
+}  // namespace fisheye_mapping
+
+#endif  // FISHEYE_MAPPING_CORE_CAMERA_ONLINE_CALIBRATION_H_

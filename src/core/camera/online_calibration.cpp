@@ -1,0 +1,381 @@
+#include "fisheye_mapping/core/camera/online_calibration.h"
+
+#include <sys/stat.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <functional>
+#include <filesystem>
+#include <sstream>
+#include <stdexcept>
+#include <utility>
+
+#include <opencv2/imgproc.hpp>
+
+#include "fisheye_mapping/core/common/param_table.h"
+
+namespace fisheye_mapping {
+namespace {
+
+constexpr double kDeg = M_PI / 180.0;
+
+double angleOf(const Eigen::Matrix3d& R) { return Eigen::AngleAxisd(R).angle(); }
+
+Eigen::Vector3d logSo3(const Eigen::Matrix3d& R) {
+  const Eigen::AngleAxisd aa(R);
+  return aa.angle() * aa.axis();
+}
+
+Eigen::Matrix3d expSo3(const Eigen::Vector3d& w) {
+  const double a = w.norm();
+  if (a < 1e-15) return Eigen::Matrix3d::Identity();
+  return Eigen::AngleAxisd(a, w / a).toRotationMatrix();
+}
+
+// 8-bit grey of a frame-set image (grey or BGR, 8/16 bit or float in [0, 1]).
+cv::Mat toGrey8(const cv::Mat& image) {
+  if (image.empty()) return image;
+  cv::Mat grey = image;
+  if (image.channels() == 3) cv::cvtColor(image, grey, cv::COLOR_BGR2GRAY);
+  else if (image.channels() == 4) cv::cvtColor(image, grey, cv::COLOR_BGRA2GRAY);
+  if (grey.depth() == CV_8U) return grey;
+  cv::Mat out;
+  if (grey.depth() == CV_16U) grey.convertTo(out, CV_8U, 1.0 / 257.0);
+  else if (grey.depth() == CV_32F || grey.depth() == CV_64F) {
+    cv::Mat clean;
+    grey.convertTo(clean, CV_32F);
+    cv::patchNaNs(clean, 0.0);
+    clean.convertTo(out, CV_8U, 255.0);
+  } else {
+    grey.convertTo(out, CV_8U);
+  }
+  return out;
+}
+
+// A blurred eighth-size copy: two of them differ by less than kStill (mean
+// absolute grey level) when the scene did not change (sensor noise averages out).
+cv::Mat thumbnail(const cv::Mat& grey) {
+  cv::Mat small;
+  cv::resize(grey, small, cv::Size(std::max(1, grey.cols / 8), std::max(1, grey.rows / 8)), 0, 0, cv::INTER_AREA);
+  cv::GaussianBlur(small, small, cv::Size(3, 3), 0);
+  return small;
+}
+constexpr double kStill = 0.6;
+
+double meanAbsDiff(const cv::Mat& a, const cv::Mat& b) {
+  if (a.empty() || b.empty() || a.size() != b.size()) return INFINITY;
+  return cv::mean(cv::abs(cv::Mat_<float>(a) - cv::Mat_<float>(b)))[0];
+}
+
+std::string fixed(double v, int digits) {
+  std::ostringstream os;
+  os.setf(std::ios::fixed);
+  os.precision(digits);
+  os << v;
+  return os.str();
+}
+
+// Moves the finished temporary file `tmp` over `path`; an existing `path` is
+// first copied to `path`.1.
+void replaceKeepingOld(const std::string& tmp, const std::string& path) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (fs::exists(path, ec)) {
+    fs::copy_file(path, path + ".1", fs::copy_options::overwrite_existing, ec);
+    if (ec) throw std::runtime_error("cannot keep the old " + path + " as " + path + ".1: " + ec.message());
+  }
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) throw std::runtime_error("cannot rename " + tmp + " to " + path);
+}
+
+}  // namespace
+
+const ParamTable<SelfCalibrationConfig>& SelfCalibrationConfig::params() {
+  using C = SelfCalibrationConfig;
+  using R = ParamRange;
+  static const ParamTable<C> t = [] {
+    ParamTable<C> t("plane_sweep");
+    t.flag("self_calibration", [](C& c) -> bool& { return c.enabled; },
+           "Keep each supporting camera's rotation relative to the reference right while driving (online "
+           "self-calibration from feature matches)")
+        .number("self_calibration_period", [](C& c) -> int& { return c.period; }, R::between(1, 10000), "frame sets",
+                "Frame sets from one self-calibration update to the next")
+        .number("self_calibration_window", [](C& c) -> int& { return c.window; }, R::between(1, 100), "frame sets",
+                "Sampled frame sets whose matches are pooled in a fit")
+        .number("self_calibration_max_correction_deg", [](C& c) -> double& { return c.max_correction_deg; },
+                R::aboveUpTo(0, 10), "deg",
+                "Largest correction from the given calibration accepted; a larger one is refused and reported")
+        .number("self_calibration_min_inliers", [](C& c) -> int& { return c.min_inliers; }, R::between(5, 1000000),
+                "matches", "Minimum evidence: inlier matches a fit needs")
+        .number("self_calibration_gain", [](C& c) -> double& { return c.gain; }, R::aboveUpTo(0, 1), "",
+                "Fraction of an accepted fit applied per update (1: at once)")
+        .number("self_calibration_change_deg", [](C& c) -> double& { return c.change_deg; }, R::above(0), "deg",
+                "The newest frame set alone needing a larger correction restarts the pooled matches (a knocked "
+                "camera)")
+        .number("self_calibration_features", [](C& c) -> int& { return c.max_features; }, R::between(10, 100000),
+                "keypoints", "ORB keypoints per image for the self-calibration")
+        .text("self_calibration_start", [](C& c) -> std::string& { return c.start_file; },
+              "Camchain saved by save_calibration to start from (empty: the calibration as given)");
+    return t;
+  }();
+  return t;
+}
+
+void SelfCalibrationConfig::validate() const { params().check(*this); }
+
+RigRefinementConfig SelfCalibrationConfig::refinement() const {
+  RigRefinementConfig r;
+  r.max_features = max_features;
+  r.min_inliers = min_inliers;
+  // Started near the solution (the current rotation): fewer samples suffice.
+  r.ransac_iterations = 60;
+  return r;
+}
+
+OnlineRigCalibrator::OnlineRigCalibrator(const Rig& given, int reference, std::vector<int> supports,
+                                         std::vector<cv::Mat> self_masks, const SelfCalibrationConfig& config)
+    : given_(given),
+      rig_(given),
+      ref_(reference),
+      supports_(std::move(supports)),
+      config_(config),
+      refinement_(config.refinement()),
+      matcher_(config.refinement(), std::move(self_masks)),
+      rng_(refinement_.seed) {
+  config_.validate();
+  const int n = int(given_.cameras.size());
+  if (ref_ < 0 || ref_ >= n) throw std::invalid_argument("reference camera index out of range");
+  for (int c : supports_) {
+    if (c < 0 || c >= n || c == ref_) throw std::invalid_argument("support camera index " + std::to_string(c) + " is not a supporting camera");
+    if (relative(given_, c).translation().norm() < 1e-6)
+      throw std::invalid_argument(given_.cameras[c].name + ": no baseline to the reference camera");
+  }
+  pools_.resize(n);
+  last_thumbs_.resize(n);
+  state_.resize(n);
+  for (int c = 0; c < n; ++c) {
+    state_[c].camera = c;
+    state_[c].name = given_.cameras[c].name;
+    state_[c].reference = c == ref_;
+    state_[c].status = c == ref_ ? "reference" : "warming up";
+  }
+  if (!config_.start_file.empty()) {
+    try {
+      startFrom(config_.start_file);
+    } catch (const std::exception& e) {
+      start_error_ = std::string("self_calibration_start not used, started from the given calibration: ") + e.what();
+    }
+  }
+}
+
+Eigen::Isometry3d OnlineRigCalibrator::relative(const Rig& rig, int c) const {
+  return rig.cameras[ref_].T_base_cam.inverse() * rig.cameras[c].T_base_cam;
+}
+
+void OnlineRigCalibrator::applyRotation(int c, const Eigen::Matrix3d& R_ref_cam) {
+  Eigen::Isometry3d T = relative(rig_, c);
+  T.linear() = R_ref_cam;
+  rig_ = withRelativePose(rig_, ref_, c, T);
+  const Eigen::Matrix3d total = relative(given_, c).linear().transpose() * R_ref_cam;
+  state_[c].correction_rotvec_deg = logSo3(total) / kDeg;
+  state_[c].correction_deg = angleOf(total) / kDeg;
+  changed_ = true;
+}
+
+bool OnlineRigCalibrator::observe(const std::vector<cv::Mat>& images) {
+  if (images.size() != given_.cameras.size())
+    throw std::invalid_argument("frame set has " + std::to_string(images.size()) + " images for a rig of " +
+                                std::to_string(given_.cameras.size()) + " cameras");
+  const bool due = frame_sets_ % config_.period == 0;
+  ++frame_sets_;
+  last_call_ms_ = 0.0;
+  if (!config_.enabled || !due || images[ref_].empty()) return false;
+  const auto t0 = std::chrono::steady_clock::now();
+  std::vector<cv::Mat> grey(images.size());
+  for (size_t c = 0; c < images.size(); ++c) grey[c] = toGrey8(images[c]);
+  const Rig before = rig_;
+  update(grey);
+  last_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  total_ms_ += last_ms_;
+  last_call_ms_ = last_ms_;
+  ++updates_;
+  for (size_t c = 0; c < rig_.cameras.size(); ++c)
+    if (!rig_.cameras[c].T_base_cam.isApprox(before.cameras[c].T_base_cam, 0.0)) return true;
+  return false;
+}
+
+void OnlineRigCalibrator::update(const std::vector<cv::Mat>& grey) {
+  const int n = int(rig_.cameras.size());
+  note_.clear();
+  // A static car: the reference image as at the last update, nothing new to learn.
+  const cv::Mat ref_thumb = thumbnail(grey[ref_]);
+  const double ref_change = meanAbsDiff(ref_thumb, last_thumbs_[ref_]);
+  if (ref_change < kStill) {
+    note_ = "not enough parallax/motion since the last update (reference image unchanged): calibration kept";
+    for (int c : supports_)
+      if (!state_[c].warn) state_[c].status = note_;
+    return;
+  }
+  last_thumbs_[ref_] = ref_thumb;
+  // Cameras that can be matched: an image with content that changed with the reference.
+  std::vector<cv::Mat> usable(n);
+  usable[ref_] = grey[ref_];
+  for (int c : supports_) {
+    CameraCalibrationState& s = state_[c];
+    if (grey[c].empty()) {
+      s.warn = true;
+      s.status = "no image in the frame set: not updated";
+      continue;
+    }
+    if (grey[c].size() != cv::Size(rig_.cameras[c].model.width(), rig_.cameras[c].model.height())) {
+      s.warn = true;
+      s.status = "image is " + std::to_string(grey[c].cols) + "x" + std::to_string(grey[c].rows) +
+                 ", calibration says " + std::to_string(rig_.cameras[c].model.width()) + "x" +
+                 std::to_string(rig_.cameras[c].model.height()) + ": not updated";
+      continue;
+    }
+    cv::Scalar mean, stddev;
+    cv::meanStdDev(grey[c], mean, stddev);
+    if (stddev[0] < 2.0) {
+      s.warn = true;
+      s.status = "image without content (mean " + fixed(mean[0], 0) + ", std " + fixed(stddev[0], 1) +
+                 "): black, capped or night: not updated";
+      continue;
+    }
+    const cv::Mat thumb = thumbnail(grey[c]);
+    if (meanAbsDiff(thumb, last_thumbs_[c]) < 0.05) {
+      s.warn = true;
+      s.status = "image frozen (unchanged since the last update while the reference image changed): not updated";
+      continue;
+    }
+    last_thumbs_[c] = thumb;
+    usable[c] = grey[c];
+  }
+  std::vector<std::vector<EpipolarMatch>> found;
+  try {
+    found = matcher_.match(rig_, ref_, usable);
+  } catch (const std::exception& e) {
+    for (int c : supports_) state_[c].warn = true, state_[c].status = std::string("matching failed: ") + e.what();
+    return;
+  }
+  for (int c : supports_) {
+    if (usable[c].empty()) continue;
+    CameraCalibrationState& s = state_[c];
+    auto& pool = pools_[c];
+    const Eigen::Isometry3d T_cur = relative(rig_, c);
+    // 1. The newest set alone: far from the current rotation -> the pool restarts.
+    Eigen::Isometry3d T_new;
+    const CameraRefinement alone = estimateCameraCorrection(found[c], T_cur, refinement_, rng_, &T_new);
+    if (alone.status == CameraRefinement::Status::kApplied && alone.correction_deg > config_.change_deg &&
+        !pool.empty()) {
+      pool.clear();
+      ++s.restarts;
+    }
+    pool.push_back(std::move(found[c]));
+    while (int(pool.size()) > config_.window) pool.pop_front();
+    std::vector<EpipolarMatch> pooled;
+    for (const auto& p : pool) pooled.insert(pooled.end(), p.begin(), p.end());
+    s.pooled_matches = int(pooled.size());
+    // 2. The pool, with the held-out and significance tests.
+    Eigen::Isometry3d T_fit;
+    const CameraRefinement fit = estimateCameraCorrection(pooled, T_cur, refinement_, rng_, &T_fit);
+    s.inliers = fit.inliers;
+    s.residual_deg = fit.rms_before_deg;
+    s.last_fit_deg = fit.status == CameraRefinement::Status::kApplied ? fit.correction_deg : 0.0;
+    if (fit.status == CameraRefinement::Status::kTooFewInliers) {
+      s.warn = true;
+      s.status = "not enough evidence: " + fit.message + ": not updated";
+      continue;
+    }
+    s.warn = false;
+    if (fit.status != CameraRefinement::Status::kApplied) {
+      s.status = "converged (" + fit.message + ")";
+      continue;
+    }
+    // 3. The total from the given calibration must stay within the maximum.
+    const Eigen::Matrix3d R_given = relative(given_, c).linear();
+    const Eigen::Matrix3d step = expSo3(config_.gain * logSo3(T_cur.linear().transpose() * T_fit.linear()));
+    const Eigen::Matrix3d R_next = T_cur.linear() * step;
+    const double total_fit_deg = angleOf(R_given.transpose() * T_fit.linear()) / kDeg;
+    if (total_fit_deg > config_.max_correction_deg) {
+      ++s.refused;
+      s.warn = true;
+      s.status = "correction of " + fixed(total_fit_deg, 3) + " deg from the given calibration refused (above " +
+                 "self_calibration_max_correction_deg " + fixed(config_.max_correction_deg, 3) + " deg)";
+      continue;
+    }
+    // 4. Smoothly.
+    applyRotation(c, R_next);
+    ++s.updates;
+    s.status = "correcting (fit " + fixed(fit.correction_deg, 3) + " deg, residual " + fixed(fit.rms_before_deg, 3) +
+               " -> " + fixed(fit.rms_after_deg, 3) + " deg)";
+  }
+}
+
+void OnlineRigCalibrator::startFrom(const std::string& camchain_path) {
+  const Rig saved = loadKalibrRig(camchain_path, savedMountPath(camchain_path));
+  const auto fail = [&](const std::string& what) { throw CalibrationError(camchain_path + ": " + what); };
+  if (saved.cameras.size() != given_.cameras.size())
+    fail("has " + std::to_string(saved.cameras.size()) + " cameras, the given calibration " +
+         std::to_string(given_.cameras.size()) + " (a calibration of another rig?)");
+  for (size_t c = 0; c < saved.cameras.size(); ++c) {
+    const RigCamera& a = saved.cameras[c];
+    const RigCamera& b = given_.cameras[c];
+    const std::string key = "cam" + std::to_string(c);
+    if (a.model.type() != b.model.type() || a.model.width() != b.model.width() ||
+        a.model.height() != b.model.height())
+      fail(key + ": camera model or resolution differs from the given calibration's");
+    const auto& p = a.model.params();
+    const auto& q = b.model.params();
+    const double d = std::abs(p.fx - q.fx) + std::abs(p.fy - q.fy) + std::abs(p.cx - q.cx) + std::abs(p.cy - q.cy) +
+                     std::abs(p.xi - q.xi);
+    if (!(d < 1e-6 * (1 + std::abs(q.fx))))
+      fail(key + ": intrinsics differ from the given calibration's (a calibration of another rig?)");
+  }
+  Rig next = rig_;
+  for (int c : supports_) {
+    const Eigen::Isometry3d Ts = saved.cameras[ref_].T_base_cam.inverse() * saved.cameras[c].T_base_cam;
+    const Eigen::Isometry3d Tg = relative(given_, c);
+    if ((Ts.translation() - Tg.translation()).norm() > 1e-3)
+      fail("cam" + std::to_string(c) + ": T_cn_cnm1 translation differs from the given calibration's by " +
+           fixed(1000 * (Ts.translation() - Tg.translation()).norm(), 1) + " mm (only rotations are corrected)");
+    const double deg = angleOf(Tg.linear().transpose() * Ts.linear()) / kDeg;
+    if (deg > config_.max_correction_deg)
+      fail("cam" + std::to_string(c) + ": rotation differs from the given calibration's by " + fixed(deg, 3) +
+           " deg, above self_calibration_max_correction_deg " + fixed(config_.max_correction_deg, 3));
+    Eigen::Isometry3d T = Tg;
+    T.linear() = Ts.linear();
+    next = withRelativePose(next, ref_, c, T);
+  }
+  rig_ = next;
+  for (int c : supports_) {
+    const Eigen::Matrix3d total = relative(given_, c).linear().transpose() * relative(rig_, c).linear();
+    state_[c].correction_rotvec_deg = logSo3(total) / kDeg;
+    state_[c].correction_deg = angleOf(total) / kDeg;
+    state_[c].status = "started from " + camchain_path;
+  }
+}
+
+std::string OnlineRigCalibrator::savedMountPath(const std::string& camchain_path) {
+  const std::string ext = ".yaml";
+  if (camchain_path.size() > ext.size() && camchain_path.compare(camchain_path.size() - ext.size(), ext.size(), ext) == 0)
+    return camchain_path.substr(0, camchain_path.size() - ext.size()) + "_mount.yaml";
+  return camchain_path + "_mount.yaml";
+}
+
+void OnlineRigCalibrator::saveCalibration(const std::string& camchain_path) const {
+  const std::string mount = savedMountPath(camchain_path);
+  // Both files are written to temporaries first, then renamed into place.
+  const std::string tmp_chain = camchain_path + ".partial", tmp_mount = mount + ".partial";
+  try {
+    writeKalibrRig(rig_, tmp_chain, tmp_mount);
+    replaceKeepingOld(tmp_mount, mount);
+    replaceKeepingOld(tmp_chain, camchain_path);
+  } catch (const std::exception& e) {
+    std::remove(tmp_chain.c_str());
+    std::remove(tmp_mount.c_str());
+    throw std::runtime_error("cannot save the calibration to " + camchain_path + ": " + e.what());
+  }
+}
+
+}  // namespace fisheye_mapping
