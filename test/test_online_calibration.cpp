@@ -58,7 +58,7 @@ double maxError(const fm::Rig& truth, const fm::Rig& rig) {
 }
 
 void printErrors(const char* what, int k, const fm::Rig& truth, const fm::OnlineRigCalibrator& cal) {
-  std::printf("  %s update %2d (%.0f ms):", what, k, cal.lastUpdateMs());
+  std::printf("  %s update %2d (%.0f ms, matching %.0f ms):", what, k, cal.lastUpdateMs(), cal.lastMatchMs());
   for (int c = 1; c < int(truth.cameras.size()); ++c)
     std::printf("  %s %.4f", truth.cameras[c].name.c_str(),
                 angleDeg(relRotation(truth, 0, c), relRotation(cal.rig(), 0, c)));

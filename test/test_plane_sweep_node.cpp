@@ -7,7 +7,9 @@
 #include <cv_bridge/cv_bridge.h>
 #include <dynamic_reconfigure/Reconfigure.h>
 #include <gtest/gtest.h>
+#include <unistd.h>
 #include <algorithm>
+#include <filesystem>
 #include <map>
 #include <mutex>
 #include <ros/package.h>
@@ -21,7 +23,9 @@
 #include <sensor_msgs/PointCloud2.h>
 
 #include "fisheye_mapping/CameraFrameSet.h"
+#include "fisheye_mapping/FilePath.h"
 #include "fisheye_mapping/FrameDone.h"
+#include "fisheye_mapping/RigSelfCalibration.h"
 #include "fisheye_mapping/core/depth/depth_image.h"
 #include "fisheye_mapping/core/eval/depth_error.h"
 #include "fisheye_mapping/core/camera/rig.h"
@@ -420,6 +424,54 @@ TEST(PlaneSweepDepthNode, CameraInfoChainFromImagesToMap) {
   ASSERT_GT(errors.size(), 500u) << "of " << points.size() << " map points";
   std::nth_element(errors.begin(), errors.begin() + errors.size() / 2, errors.end());
   EXPECT_LT(errors[errors.size() / 2], 0.02) << "median relative range error of " << errors.size() << " map points";
+}
+
+// The online self-calibration's state (depth/self_calibration, latched, after
+// the frame sets of the tests above) and ~save_calibration: the camchain and
+// its mount written, loadable, the old one kept as .1; a folder refused with
+// a message naming it, the node going on.
+TEST(PlaneSweepDepthNode, SelfCalibrationStateAndSaveService) {
+  ros::NodeHandle nh;
+  fisheye_mapping::RigSelfCalibrationConstPtr state;
+  auto sub = nh.subscribe<fisheye_mapping::RigSelfCalibration>(
+      "depth/self_calibration", 1, [&](const fisheye_mapping::RigSelfCalibrationConstPtr& m) { state = m; });
+  ASSERT_TRUE(waitFor([&] { return state && state->updates > 0; }, 20.0)) << "no self-calibration state";
+  EXPECT_EQ(state->reference_camera, "cam0");
+  EXPECT_GE(state->frame_sets, state->updates);
+  ASSERT_EQ(state->cameras.size(), 3u);
+  EXPECT_TRUE(state->cameras[0].reference);
+  const fm::Rig rig = smallRig();
+  for (int c = 1; c < 3; ++c) {
+    const auto& cam = state->cameras[c];
+    EXPECT_EQ(cam.camera, rig.cameras[c].name);
+    EXPECT_FALSE(cam.reference);
+    EXPECT_FALSE(cam.status.empty());
+    // The rig is exact: whatever the evidence, no correction beyond the noise.
+    EXPECT_LT(cam.correction_deg, 0.1) << cam.status;
+  }
+  const std::string dir = "/tmp/fm_test_plane_sweep_node_" + std::to_string(getpid());
+  std::filesystem::create_directories(dir);
+  fisheye_mapping::FilePath srv;
+  srv.request.path = dir + "/camchain.yaml";
+  ASSERT_TRUE(ros::service::waitForService("plane_sweep/save_calibration", ros::Duration(10.0)));
+  for (int k = 0; k < 2; ++k) {
+    ASSERT_TRUE(ros::service::call("plane_sweep/save_calibration", srv));
+    EXPECT_TRUE(srv.response.success) << srv.response.message;
+  }
+  EXPECT_NE(srv.response.message.find(dir + "/camchain.yaml"), std::string::npos) << srv.response.message;
+  EXPECT_TRUE(std::filesystem::exists(dir + "/camchain.yaml.1"));
+  const fm::Rig saved = fm::loadKalibrRig(dir + "/camchain.yaml", dir + "/camchain_mount.yaml");
+  ASSERT_EQ(saved.cameras.size(), 3u);
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_LT((saved.cameras[c].T_cam0_cam.translation() - rig.cameras[c].T_cam0_cam.translation()).norm(), 1e-9);
+    EXPECT_LT(Eigen::AngleAxisd(saved.cameras[c].T_cam0_cam.linear().transpose() * rig.cameras[c].T_cam0_cam.linear())
+                  .angle() * 180 / M_PI, state->cameras[c].correction_deg + 1e-6);
+  }
+  srv.request.path = dir;
+  ASSERT_TRUE(ros::service::call("plane_sweep/save_calibration", srv));
+  EXPECT_FALSE(srv.response.success);
+  EXPECT_NE(srv.response.message.find(dir), std::string::npos) << srv.response.message;
+  std::filesystem::remove_all(dir);
 }
 
 int main(int argc, char** argv) {

@@ -34,6 +34,7 @@
 #include "cli.h"
 #include "fisheye_mapping/Detection2DArray.h"
 #include "fisheye_mapping/core/camera/rig.h"
+#include "fisheye_mapping/core/camera/rig_refinement.h"
 #include "fisheye_mapping/core/sim/synthetic_world.h"
 #include "fisheye_mapping/core/sim/vehicle_labels.h"
 #include "fisheye_mapping/ros/conversions.h"
@@ -77,6 +78,11 @@ const char* kUsage =
     "  --blur PX                   optical blur, Gaussian sigma in pixels (default 0)\n"
     "  --asphalt-grain A           pixel-scale grain of the asphalt, albedo amplitude (default 0)\n"
     "  --clouds A                  low-contrast clouds, intensity amplitude (default 0)\n"
+    "  --knock CAM:DEG@S           camera CAM (a supporting camera's index) is knocked at S\n"
+    "                              seconds of drive: its true rotation turns by DEG degrees\n"
+    "                              (about the axis (1, 1, 0)/sqrt 2 of its frame); the\n"
+    "                              calibration given stays; DIR/camchain_knocked.yaml is the\n"
+    "                              truth after the knock\n"
     "  --realistic                 all of the above as on a real rig: --calib-rot-deg 0.3\n"
     "                              --calib-trans-mm 5 --gain-spread 0.2 --offset-spread 4\n"
     "                              --gamma-spread 0.1 --vignetting 0.45 --read-noise 2\n"
@@ -93,6 +99,8 @@ struct Options {
   double duration = 20, rate = 10, speed = 8, jitter_ms = 0, drop = 0, pose_noise = 0;
   int moving = 6;
   double calib_rot_deg = 0, calib_trans_mm = 0, grain = 0, clouds = 0;
+  int knock_camera = -1;  // none
+  double knock_deg = 0, knock_at = 0;
   fm::synth::SensorSpread sensors;
 };
 
@@ -166,6 +174,17 @@ Options parse(int argc, char** argv) {
       else if (a == "--blur") o.sensors.base.blur_px = number(a, next());
       else if (a == "--asphalt-grain") o.grain = number(a, next());
       else if (a == "--clouds") o.clouds = number(a, next());
+      else if (a == "--knock") {
+        const std::string v = next();
+        const size_t colon = v.find(':'), at = v.find('@');
+        if (colon == std::string::npos || at == std::string::npos || at < colon)
+          throw fm::cli::UsageError("--knock expects CAM:DEG@S (e.g. 2:0.5@10), got '" + v + "'");
+        o.knock_camera = static_cast<int>(integer(a, v.substr(0, colon), 1, 15));
+        o.knock_deg = number(a, v.substr(colon + 1, at - colon - 1));
+        o.knock_at = number(a, v.substr(at + 1));
+        if (!(o.knock_deg > 0 && o.knock_deg <= 10)) throw fm::cli::UsageError("--knock: DEG must lie in (0, 10], got '" + v + "'");
+        if (!(o.knock_at >= 0)) throw fm::cli::UsageError("--knock: S must be >= 0, got '" + v + "'");
+      }
       else return false;
       return true;
     });
@@ -324,6 +343,26 @@ int main(int argc, char** argv) {
     } else {
       fm::writeKalibrRig(rig, opt.out + "/camchain.yaml", opt.out + "/mount.yaml");
     }
+    // A knock: the true rig from knock_at on.
+    fm::Rig knocked = rig;
+    std::filesystem::remove(opt.out + "/camchain_knocked.yaml");
+    std::filesystem::remove(opt.out + "/knock.yaml");
+    if (opt.knock_camera >= 0) {
+      if (opt.knock_camera >= n_cams)
+        usageError("--knock: camera " + std::to_string(opt.knock_camera) + " is not in the rig (" +
+                   std::to_string(n_cams) + " cameras)");
+      Eigen::Isometry3d T = rig.cameras[0].T_base_cam.inverse() * rig.cameras[opt.knock_camera].T_base_cam;
+      T.linear() = T.linear() * Eigen::AngleAxisd(opt.knock_deg * M_PI / 180.0, Eigen::Vector3d(1, 1, 0).normalized())
+                                    .toRotationMatrix();
+      knocked = fm::withRelativePose(rig, 0, opt.knock_camera, T);
+      fm::writeKalibrRig(knocked, opt.out + "/camchain_knocked.yaml", opt.out + "/mount_knocked.yaml");
+      std::filesystem::remove(opt.out + "/mount_knocked.yaml");  // the mount (cam0) does not change
+      std::ofstream k(opt.out + "/knock.yaml");
+      k << "# make_drive --knock: from at_s seconds of drive on, the camera's true rotation is turned by deg degrees\n"
+        << "# about the axis (1, 1, 0)/sqrt 2 of its frame (camchain_knocked.yaml); the calibration given stays.\n"
+        << "camera: cam" << opt.knock_camera << "\ndeg: " << opt.knock_deg << "\nat_s: " << opt.knock_at << "\n";
+      if (!k) throw std::runtime_error("cannot write " + opt.out + "/knock.yaml");
+    }
     world.saveStaticMeshPly(opt.out + "/static_scene.ply");
 
     const std::string bag_path = opt.out + "/drive.bag";
@@ -374,8 +413,9 @@ int main(int argc, char** argv) {
       const double t = s / opt.rate;
       const ros::Time stamp = t0 + ros::Duration(t);
       const Eigen::Isometry3d T_W_B = world.egoPose(t);
-      for (size_t c = 0; c < rig.cameras.size(); ++c) {
-        const auto& cam = rig.cameras[c];
+      const fm::Rig& truth = opt.knock_camera >= 0 && t >= opt.knock_at ? knocked : rig;
+      for (size_t c = 0; c < truth.cameras.size(); ++c) {
+        const auto& cam = truth.cameras[c];
         const std::string ns = "/cam" + std::to_string(c);
         double jitter = 0;
         if (opt.jitter_ms > 0) jitter = (2 * U(rng) - 1) * opt.jitter_ms * 1e-3;

@@ -353,6 +353,9 @@ int main(int argc, char** argv) {
     std::ofstream csv(csv_tmp);
     if (!csv) throw std::runtime_error("cannot write " + csv_tmp);
     csv << "stamp,sweep_ms,detect_ms,mask_ms,fuse_ms,total_ms,valid_pixels,masked_pixels\n";
+    std::ostringstream calib_csv;
+    calib_csv << "stamp,camera,rotvec_ref_cam_x_deg,rotvec_ref_cam_y_deg,rotvec_ref_cam_z_deg,correction_deg,"
+                 "residual_deg,inliers,level,status\n";
     std::vector<double> t_sweep, t_det, t_mask, t_fuse, t_total;
     size_t sets_seen = 0, processed = 0, skipped_pose = 0, no_boxes = 0;
     const auto run_start = Clock::now();
@@ -391,6 +394,23 @@ int main(int argc, char** argv) {
           std::vector<cv::Mat> images;
           for (size_t c = 0; c < set.size(); ++c) images.push_back(set[c].sweepImage(rig.cameras[c].name));
           r = mapper.process(images, T_W_B, boxes);
+        }
+        if (r.depth.calibration_ms > 0) {
+          // The self-calibration's state after this update: each supporting
+          // camera's rotation relative to the reference, as used from now on.
+          const fm::OnlineRigCalibrator& cal = *mapper.depthStage().selfCalibration();
+          const fm::Rig& now = cal.rig();
+          for (const auto& c : cal.state()) {
+            if (c.reference) continue;
+            const Eigen::AngleAxisd aa(
+                (now.cameras[cal.reference()].T_base_cam.inverse() * now.cameras[c.camera].T_base_cam).linear());
+            const Eigen::Vector3d w = aa.angle() * aa.axis() * 180.0 / M_PI;
+            std::string status = c.status;
+            std::replace(status.begin(), status.end(), ',', ';');
+            calib_csv << std::fixed << stamp.toSec() << "," << c.name << "," << w.x() << "," << w.y() << "," << w.z()
+                      << "," << c.correction_deg << "," << c.residual_deg << "," << c.inliers << ","
+                      << (c.warn ? "WARN" : "OK") << "," << status << "\n";
+          }
         }
         if (!save_depth.empty())
           fm::writeDepthTiff(save_depth + "/" + std::to_string(stamp.toNSec()) + ".tiff", r.depth.depth);
@@ -461,6 +481,40 @@ int main(int argc, char** argv) {
                   syncText(one_stream ? fm::SyncPolicy::Exact : sync_cfg.policy, sync_cfg.max_interval).c_str(),
                   mapper.depthStage().backendName().c_str(), mesher.numTriangles(), mesher.surfaceCloud().size());
     md << buf;
+    if (const fm::OnlineRigCalibrator* cal = mapper.depthStage().selfCalibration()) {
+      // The online self-calibration (depth stage): its cost and each camera's state.
+      const double sweep_total = std::accumulate(t_sweep.begin(), t_sweep.end(), 0.0);
+      std::snprintf(buf, sizeof(buf),
+                    "\nself-calibration: %d updates over %d frame sets, %.0f ms per update, %.1f ms per frame set "
+                    "on average (%.1f %% of the depth stage's time)%s%s\n\n",
+                    cal->updates(), cal->frameSets(), cal->updates() ? cal->totalMs() / cal->updates() : 0.0,
+                    cal->frameSets() ? cal->totalMs() / cal->frameSets() : 0.0,
+                    sweep_total > 0 ? 100.0 * cal->totalMs() / sweep_total : 0.0,
+                    cal->startError().empty() ? "" : "; ", cal->startError().c_str());
+      md << buf;
+      md << "| camera | correction deg | rotation vector deg (camera frame) | residual deg | inliers | updates | "
+            "refused | restarts | status |\n|---|---:|---|---:|---:|---:|---:|---:|---|\n";
+      for (const auto& c : cal->state()) {
+        if (c.reference) continue;
+        std::snprintf(buf, sizeof(buf), "| %s | %.3f | [%.3f, %.3f, %.3f] | %.3f | %d | %d | %d | %d | %s%s |\n",
+                      c.name.c_str(), c.correction_deg, c.correction_rotvec_deg.x(), c.correction_rotvec_deg.y(),
+                      c.correction_rotvec_deg.z(), c.residual_deg, c.inliers, c.updates, c.refused, c.restarts,
+                      c.warn ? "WARN: " : "", c.status.c_str());
+        md << buf;
+      }
+      cli::writeTextAtomically(out + "/self_calibration.csv", [&](std::ostream& f) { f << calib_csv.str(); });
+      written.push_back("self_calibration.csv");
+      if (cal->changed()) {
+        try {
+          mapper.depthStage().saveCalibration(out + "/self_calibrated_camchain.yaml");
+          written.push_back("self_calibrated_camchain.yaml");
+          written.push_back("self_calibrated_camchain_mount.yaml");
+        } catch (const std::exception& e) {
+          not_written.push_back("self_calibrated_camchain.yaml");
+          std::cerr << "offline_mapper: " << e.what() << "\n";
+        }
+      }
+    }
     csv.close();
     if (!csv) throw std::runtime_error("cannot write " + csv_tmp + " (disk full?)");
     if (std::rename(csv_tmp.c_str(), (out + "/timings.csv").c_str()) != 0)

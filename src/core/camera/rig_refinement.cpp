@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <numeric>
 #include <random>
 #include <sstream>
@@ -116,7 +117,7 @@ bool gaussNewton(const EpipolarModel& model, const std::vector<Match>& matches, 
     const Eigen::VectorXd dx = -ldlt.solve(b);
     if (!dx.allFinite()) return false;
     *x += dx;
-    if (dx.norm() < 1e-12) break;
+    if (dx.norm() < 1e-9) break;  // radians: far below any residual
   }
   return x->allFinite();
 }
@@ -346,6 +347,8 @@ void RigRefinementConfig::validate() const {
   require(heldout_truncation_deg > 0 && heldout_truncation_deg <= max_initial_residual_deg, "heldout_truncation_deg",
           "must be in (0, max_initial_residual_deg]");
   require(min_significance >= 0 && std::isfinite(min_significance), "min_significance", "must be >= 0");
+  require(min_generalization >= 0 && min_generalization <= 1, "min_generalization", "must be in [0, 1]");
+  require(max_fit_matches == 0 || max_fit_matches >= min_inliers, "max_fit_matches", "must be 0 or >= min_inliers");
 }
 
 const char* toString(CameraRefinement::Status status) {
@@ -406,7 +409,13 @@ const RigMatcher::Warp& RigMatcher::warpFor(const Rig& rig, int reference, int c
   const bool fresh = w.width == ref_model.width() && w.height == ref_model.height() && !w.map_x.empty() &&
                      Eigen::AngleAxisd(w.R_ref_cam.transpose() * R_ref_cam).angle() < 0.25 * kDeg;
   if (fresh) return w;
-  const std::vector<Eigen::Vector3f> rays = pixelRays(ref_model);
+  if (ref_rays_.empty() || ref_rays_width_ != ref_model.width() || ref_rays_height_ != ref_model.height() ||
+      std::memcmp(&ref_rays_camera_, &ref_model.params(), sizeof(ref_rays_camera_)) != 0) {
+    ref_rays_ = pixelRays(ref_model);
+    ref_rays_width_ = ref_model.width(), ref_rays_height_ = ref_model.height();
+    ref_rays_camera_ = ref_model.params();
+  }
+  const std::vector<Eigen::Vector3f>& rays = ref_rays_;
   const int width = ref_model.width(), height = ref_model.height();
   const CameraModel& model = rig.cameras[c].model;
   const Eigen::Matrix3f R_cam_ref = R_ref_cam.transpose().cast<float>();
@@ -570,7 +579,8 @@ std::vector<std::vector<EpipolarMatch>> RigMatcher::match(const Rig& rig, int re
 
 CameraRefinement estimateCameraCorrection(const std::vector<EpipolarMatch>& matches, const Eigen::Isometry3d& T_ref_cam,
                                           const RigRefinementConfig& config, std::mt19937_64& rng,
-                                          Eigen::Isometry3d* T_estimated) {
+                                          Eigen::Isometry3d* T_estimated, const std::vector<int>& groups) {
+  require(groups.empty() || groups.size() == matches.size(), "groups", "need none or one per match");
   config.validate();
   CameraRefinement out;
   out.status = CameraRefinement::Status::kTooFewInliers;
@@ -585,13 +595,16 @@ CameraRefinement estimateCameraCorrection(const std::vector<EpipolarMatch>& matc
   // Candidates: near the epipolar plane at the calibration, away from the
   // epipoles, and in front of both cameras (or too distant to tell).
   std::vector<Match> cand;
+  std::vector<int> cand_group;  // the frame set (group) of each candidate
   const double min_sin = std::sin(2.0 * kDeg);
-  for (const Match& m : matches) {
+  for (size_t mi = 0; mi < matches.size(); ++mi) {
+    const Match& m = matches[mi];
     if (!m.f_ref.allFinite() || !m.f_cam.allFinite() || !(m.weight > 0)) continue;
     const Eigen::Vector3d g = R0 * m.f_cam;
     if (t_dir.cross(m.f_ref).norm() < min_sin || t_dir.cross(g).norm() < min_sin) continue;
     if (std::abs(EpipolarModel::residual(R0, t_dir, m)) > config.max_initial_residual_deg * kDeg) continue;
-    if (std::acos(std::clamp(m.f_ref.dot(g), -1.0, 1.0)) > 1.0 * kDeg) {
+    const double parallax = std::acos(std::clamp(m.f_ref.dot(g), -1.0, 1.0));
+    if (parallax > 1.0 * kDeg) {
       // lambda_ref f_ref - lambda_cam g = t in the least-squares sense.
       Eigen::Matrix<double, 3, 2> A;
       A << m.f_ref, -g;
@@ -599,8 +612,22 @@ CameraRefinement estimateCameraCorrection(const std::vector<EpipolarMatch>& matc
       if (!(lambda.x() > 0 && lambda.y() > 0)) continue;
     }
     cand.push_back(m);
+    cand_group.push_back(groups.empty() ? 0 : groups[mi]);
   }
   out.candidates = int(cand.size());
+  if (config.max_fit_matches > 0 && int(cand.size()) > config.max_fit_matches) {
+    // An even subsample (matches come in image order: every part of the image keeps its share).
+    std::vector<Match> sub;
+    std::vector<int> sub_group;
+    sub.reserve(config.max_fit_matches);
+    const double step = double(cand.size()) / config.max_fit_matches;
+    for (int k = 0; k < config.max_fit_matches; ++k) {
+      sub.push_back(cand[size_t(k * step)]);
+      sub_group.push_back(cand_group[size_t(k * step)]);
+    }
+    cand.swap(sub);
+    cand_group.swap(sub_group);
+  }
   if (!cand.empty()) {
     // Relative weights: 1 at the median, so that Huber's scale stays in degrees.
     std::vector<double> w;
@@ -633,11 +660,21 @@ CameraRefinement estimateCameraCorrection(const std::vector<EpipolarMatch>& matc
   const double sig = significance(model, cand, best, x);
   out.standard_error_deg = sig > 0 ? x.norm() / sig / kDeg : INFINITY;
 
-  // Held out: each half of the candidates (alternate matches) fitted on its
-  // own and scored on the other half, against the calibration's score there.
+  // Held out: each half of the candidates fitted on its own and scored on
+  // the other half, against the calibration's score there. With matches of
+  // several frame sets the halves are whole frame sets (alternate groups): a
+  // bias of one scene (near points and the calibrated translation's error)
+  // then does not carry over to the half it is scored on. Else alternate
+  // matches.
   const double tau = config.heldout_truncation_deg * kDeg;
   std::vector<int> half[2];
-  for (int i = 0; i < int(cand.size()); ++i) half[i % 2].push_back(i);
+  std::vector<int> ids = cand_group;
+  std::sort(ids.begin(), ids.end());
+  ids.erase(std::unique(ids.begin(), ids.end()), ids.end());
+  for (int i = 0; i < int(cand.size()); ++i) {
+    const int rank = int(std::lower_bound(ids.begin(), ids.end(), cand_group[i]) - ids.begin());
+    half[ids.size() >= 2 ? rank % 2 : i % 2].push_back(i);
+  }
   double before = 0, after = 0;
   bool both_better = true;
   for (int k = 0; k < 2; ++k) {
@@ -656,6 +693,20 @@ CameraRefinement estimateCameraCorrection(const std::vector<EpipolarMatch>& matc
     out.status = CameraRefinement::Status::kNotImproved;
     why << "held-out residual not lower in both halves (" << out.heldout_before_deg << " -> "
         << out.heldout_after_deg << " deg)";
+    out.message = why.str();
+    return out;
+  }
+  // What the fit explains of the residual on matches it was not fitted to
+  // must be a fair share of what it explains on its own: a genuine error
+  // explains about as much of both; a fit to one scene's bias (near points
+  // and the calibrated translation's error) mostly of its own.
+  const double explained_in = std::sqrt(std::max(0.0, std::pow(out.rms_before_deg, 2) - std::pow(out.rms_after_deg, 2)));
+  const double explained_out =
+      std::sqrt(std::max(0.0, std::pow(out.heldout_before_deg, 2) - std::pow(out.heldout_after_deg, 2)));
+  if (explained_out < config.min_generalization * explained_in) {
+    out.status = CameraRefinement::Status::kNotImproved;
+    why << "the fit explains " << explained_in << " deg of its own residual but only " << explained_out
+        << " deg of the held-out one";
     out.message = why.str();
     return out;
   }
@@ -721,12 +772,14 @@ RigRefinementResult refineRig(const Rig& rig, int reference, const std::vector<s
   // Matches per support camera, pooled over the frame sets.
   RigMatcher matcher(config, self_masks);
   std::vector<std::vector<Match>> pooled(n_cams);
+  std::vector<std::vector<int>> groups(n_cams);  // the frame set of each match
   std::vector<int> raw_matches(n_cams, 0);
-  for (const auto& set : frame_sets) {
+  for (size_t k = 0; k < frame_sets.size(); ++k) {
     std::vector<int> raw;
-    const auto found = matcher.match(rig, reference, set, &raw);
+    const auto found = matcher.match(rig, reference, frame_sets[k], &raw);
     for (int c = 0; c < n_cams; ++c) {
       pooled[c].insert(pooled[c].end(), found[c].begin(), found[c].end());
+      groups[c].insert(groups[c].end(), found[c].size(), int(k));
       raw_matches[c] += raw[c];
     }
   }
@@ -736,7 +789,8 @@ RigRefinementResult refineRig(const Rig& rig, int reference, const std::vector<s
     if (c == reference) continue;
     Eigen::Isometry3d T_new;
     CameraRefinement r =
-        estimateCameraCorrection(pooled[c], T_base_ref.inverse() * rig.cameras[c].T_base_cam, config, rng, &T_new);
+        estimateCameraCorrection(pooled[c], T_base_ref.inverse() * rig.cameras[c].T_base_cam, config, rng, &T_new,
+                                 groups[c]);
     r.camera = c;
     r.name = rig.cameras[c].name;
     r.matches = raw_matches[c];

@@ -7,10 +7,11 @@
 // camera; a match is a pair of bearings in the cameras' own frames, so it stays
 // valid whatever rotation is applied later. Per camera:
 //  1. the newest frame set's matches are fitted alone (estimateCameraCorrection:
-//     RANSAC, Huber Gauss-Newton, held-out acceptance). When that fit is
-//     applied and needs more than `change_deg` from the current rotation, the
-//     older matches no longer describe the camera (it was knocked, or the
-//     calibration is still far off): the pool restarts from the newest set;
+//     RANSAC, Huber Gauss-Newton, held-out acceptance). When that fit needs
+//     more than `change_deg` from the current rotation in two updates in a
+//     row, both times to within `change_deg` of the same rotation, the older
+//     matches no longer describe the camera (it was knocked, or the
+//     calibration is still far off): the pool restarts from those two sets;
 //  2. the pool (the last `window` sampled frame sets) is fitted; the fit is
 //     applied only if it passes the held-out test (scored on matches it was
 //     not fitted to, against the current rotation's score on them: no bias
@@ -103,6 +104,8 @@ class OnlineRigCalibrator {
   int frameSets() const { return frame_sets_; }
   int updates() const { return updates_; }
   double lastUpdateMs() const { return last_ms_; }
+  // Of which finding the matches (the rest: the fits).
+  double lastMatchMs() const { return last_match_ms_; }
   // Time of the last observe() call (0 when it did not update).
   double lastCallMs() const { return last_call_ms_; }
   // Why self_calibration_start could not be used ("" if it was, or none was
@@ -135,15 +138,17 @@ class OnlineRigCalibrator {
   int ref_;
   std::vector<int> supports_;
   SelfCalibrationConfig config_;
-  RigRefinementConfig refinement_;
+  RigRefinementConfig refinement_, quick_;  // the pool's fit; the newest set's alone
   RigMatcher matcher_;
   std::mt19937_64 rng_;
   std::vector<std::deque<std::vector<EpipolarMatch>>> pools_;  // per camera, newest last
   std::vector<cv::Mat> last_thumbs_;                           // per camera, at the last update
+  std::vector<bool> has_far_;                 // per camera: the last update's newest set alone was far off
+  std::vector<Eigen::Matrix3d> far_target_;   // ... and where it wanted R_ref_cam
   std::vector<CameraCalibrationState> state_;
   std::string note_;
   int frame_sets_ = 0, updates_ = 0;
-  double last_ms_ = 0.0, total_ms_ = 0.0, last_call_ms_ = 0.0;
+  double last_ms_ = 0.0, total_ms_ = 0.0, last_call_ms_ = 0.0, last_match_ms_ = 0.0;
   std::string start_error_;
   bool changed_ = false;
 };

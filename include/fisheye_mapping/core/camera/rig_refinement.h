@@ -25,9 +25,11 @@
 // it, so counting inliers at a fixed threshold would): two-fold
 // cross-validation, each half's fit scored on the other half's matches by a
 // truncated RMS residual (heldout_truncation_deg) against the calibration's
-// score on the same matches; both halves must improve, and the correction must
-// exceed its own standard error (significance) - else the camera keeps its
-// calibration.
+// score on the same matches (halves of whole frame sets when there are
+// several: a bias of one scene does not score on itself); both halves must
+// improve, the residual explained on held-out matches must be a fair share of
+// the one explained on the fitted ones, and the correction must exceed its own
+// standard error (significance) - else the camera keeps its calibration.
 //
 // The pieces are used on their own by the online self-calibration
 // (online_calibration.h): RigMatcher gathers one frame set's matches,
@@ -70,6 +72,14 @@ struct RigRefinementConfig {
   // The correction must exceed this many standard errors (from the fit's
   // normal equations and residual spread) to be applied.
   double min_significance = 4.0;
+  // The residual the fit explains on held-out matches (sqrt(before^2 -
+  // after^2)) must be at least this share of what it explains on the
+  // matches it was fitted to.
+  double min_generalization = 0.5;
+  // A camera's candidates beyond this are evenly subsampled for the fits
+  // (0: all).
+  int max_fit_matches = 0;
+
   // Throws std::invalid_argument naming the field.
   void validate() const;
 };
@@ -159,15 +169,20 @@ class RigMatcher {
   std::vector<cv::Mat> detect_masks_;  // per camera: non-zero where features may lie (outside the self-mask)
   std::vector<Warp> warps_;
   int warp_reference_ = -1;
+  std::vector<Eigen::Vector3f> ref_rays_;  // the reference camera's pixel rays, kept with its model
+  int ref_rays_width_ = 0, ref_rays_height_ = 0;
+  FmCameraT<double> ref_rays_camera_{};
 };
 
 // Fits one support camera's pose relative to the reference, T_ref_cam (the
 // rig's current), to matches; the result's status says whether it is applied
 // (kApplied: *T_estimated is the new pose; else *T_estimated = T_ref_cam).
-// `camera`/`name` only label the result. rng: RANSAC sampling.
+// rng: RANSAC sampling. groups: none, or per match the frame set it came
+// from: the held-out halves are then whole frame sets (alternate groups), so
+// that a bias of one scene is not scored on itself.
 CameraRefinement estimateCameraCorrection(const std::vector<EpipolarMatch>& matches, const Eigen::Isometry3d& T_ref_cam,
                                           const RigRefinementConfig& config, std::mt19937_64& rng,
-                                          Eigen::Isometry3d* T_estimated);
+                                          Eigen::Isometry3d* T_estimated, const std::vector<int>& groups = {});
 
 // The rig with camera `camera`'s pose relative to `reference` replaced by
 // T_ref_cam; every camera's T_cam0_cam / T_base_cam stay consistent (cam0 may
