@@ -194,7 +194,9 @@ bool OnlineRigCalibrator::observe(const std::vector<cv::Mat>& images) {
   if (images.size() != given_.cameras.size())
     throw std::invalid_argument("frame set has " + std::to_string(images.size()) + " images for a rig of " +
                                 std::to_string(given_.cameras.size()) + " cameras");
-  const bool due = frame_sets_ % config_.period == 0;
+  // Every period-th set, and the second one too: a fit needs two frame sets,
+  // the first correction then comes one set after the start, not a period.
+  const bool due = frame_sets_ % config_.period == 0 || frame_sets_ == 1;
   ++frame_sets_;
   last_call_ms_ = 0.0;
   if (!config_.enabled || !due || images[ref_].empty()) return false;
@@ -312,6 +314,13 @@ void OnlineRigCalibrator::update(const std::vector<cv::Mat>& grey) {
       continue;
     }
     s.warn = false;
+    // One frame set alone cannot tell its scene's bias (near points and the
+    // calibrated translation's error) from the camera's error: a fit is
+    // applied only once the pool holds two sets (held out against each other).
+    if (fit.status == CameraRefinement::Status::kApplied && pool.size() < 2 && config_.window >= 2) {
+      s.status = "warming up (one frame set of evidence; a fit is applied from two on)";
+      continue;
+    }
     if (fit.status != CameraRefinement::Status::kApplied) {
       s.status = "converged (" + fit.message + ")";
       continue;

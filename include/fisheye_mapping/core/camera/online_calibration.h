@@ -2,7 +2,7 @@
 // rotation relative to the reference camera right while driving, from the
 // frame sets the depth stage sweeps anyway. No ROS.
 //
-// Every `period`-th frame set, the rig's matcher (RigMatcher, the first half of
+// Every `period`-th frame set (and the second one), the rig's matcher (RigMatcher, the first half of
 // refine_rig) gathers feature matches between the reference and each support
 // camera; a match is a pair of bearings in the cameras' own frames, so it stays
 // valid whatever rotation is applied later. Per camera:
@@ -13,9 +13,11 @@
 //     matches no longer describe the camera (it was knocked, or the
 //     calibration is still far off): the pool restarts from those two sets;
 //  2. the pool (the last `window` sampled frame sets) is fitted; the fit is
-//     applied only if it passes the held-out test (scored on matches it was
-//     not fitted to, against the current rotation's score on them: no bias
-//     toward the current calibration) and is significant;
+//     applied only if the pool holds two frame sets or more and the fit
+//     passes the held-out test (halves of whole frame sets, each half's fit
+//     scored on the other half against the current rotation's score there:
+//     no bias toward the current calibration, nor toward one scene) and is
+//     significant;
 //  3. a correction whose total from the given calibration exceeds
 //     `max_correction_deg` is refused and reported, never applied;
 //  4. applied smoothly: the current rotation moves a fraction `gain` of the
@@ -91,8 +93,8 @@ class OnlineRigCalibrator {
                       const SelfCalibrationConfig& config);
 
   // One frame set (images[i]: rig camera i; grey or BGR, 8/16 bit or float in
-  // [0, 1]; empty: not in the set). Every period-th call updates. True when
-  // the rig changed.
+  // [0, 1]; empty: not in the set). Every period-th call updates (and the
+  // second). True when the rig changed.
   bool observe(const std::vector<cv::Mat>& images);
 
   const Rig& rig() const { return rig_; }
