@@ -205,16 +205,26 @@ TEST(OfflineMapper, MapsADriveAndWritesTimings) {
             std::string::npos)
       << out;
   EXPECT_NE(out.find("offline_mapper: cloud.pcd not written: "), std::string::npos) << out;
-  EXPECT_NE(out.find("wrote " + kDir + "/map/cloud_all.pcd, timings.csv, timings.md\n"), std::string::npos) << out;
+  EXPECT_NE(out.find("wrote " + kDir + "/map/cloud_all.pcd, self_calibration.csv, timings.csv, timings.md\n"),
+            std::string::npos)
+      << out;
   EXPECT_NE(out.find("not written (earlier files of that name left as they were): mesh.ply, cloud.pcd\n"),
             std::string::npos)
       << out;
   EXPECT_EQ(size(kDir + "/map/mesh.ply"), mesh_size);
   EXPECT_EQ(size(kDir + "/map/cloud.pcd"), cloud_size);
   EXPECT_EQ(lines(kDir + "/map/timings.csv"), 1 + 1);
-  EXPECT_NE(full_run.find("wrote " + kDir + "/map/mesh.ply, cloud.pcd, cloud_all.pcd, timings.csv, timings.md\n"),
+  EXPECT_NE(full_run.find("wrote " + kDir + "/map/mesh.ply, cloud.pcd, cloud_all.pcd, self_calibration.csv, "
+                                               "timings.csv, timings.md\n"),
             std::string::npos)
       << full_run;
+  // The depth stage's online self-calibration (on by default): its time and
+  // each supporting camera's state in timings.md, one CSV row per camera and
+  // update (the small rig's exact calibration: nothing to correct, nothing
+  // more written).
+  EXPECT_NE(full_run.find("self-calibration: "), std::string::npos) << full_run;
+  EXPECT_NE(full_run.find("| cam1 | 0.000 |"), std::string::npos) << full_run;
+  EXPECT_EQ(full_run.find("self_calibrated_camchain.yaml"), std::string::npos) << full_run;
   // No temporary file is left behind.
   EXPECT_EQ(run("ls " + kDir + "/map | grep -c partial", &rc), "0\n");
 
