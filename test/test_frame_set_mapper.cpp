@@ -92,24 +92,15 @@ TEST(FrameSetMapper, GivenDepthIsMaskedAndFusedOnTheWall) {
   EXPECT_GT(mapper.mesher().numTriangles(), 0u);
 }
 
-// With images, the mapper's depth is the depth stage's, masked: the same as
-// running DepthStage and maskDepthBoxes one after the other (the nodelets).
-// Images of a textured wall 8 m ahead of cam0 (plane z = 8 in cam0's frame),
-// rendered for both cameras of the rig: the depth lies on the wall, the box
-// (grown by the 10 px margin: pixel centres in [290, 410] x [90, 210], 120 x
-// 120 pixels by hand) is masked, and the mapper's depth is the depth stage's
-// run alone and masked (what the nodelets do one stage each).
-TEST(FrameSetMapper, ImagesGiveTheDepthStagesDepthMasked) {
-  const fm::Rig rig = twoCameraRig();
-  fm::FrameSetMapperConfig c = smallConfig();
-  c.depth.sweep.far = 30.0;
+// Images of a textured wall `wall` metres ahead of cam0 (plane z = wall in
+// cam0's frame), rendered for every camera of the rig.
+std::vector<cv::Mat> wallImages(const fm::Rig& rig, double wall) {
   // The wall's texture: 2 cm texels over x, y in [-20, 20] m, smoothed.
   cv::Mat texels(2000, 2000, CV_32FC1);
   cv::RNG rng(7);
   rng.fill(texels, cv::RNG::UNIFORM, 0.0, 1.0);
   cv::GaussianBlur(texels, texels, cv::Size(0, 0), 1.5);
   cv::normalize(texels, texels, 0.0, 255.0, cv::NORM_MINMAX);
-  const double wall = 8.0;
   const Eigen::Isometry3d T_c0_base = rig.cameras[0].T_base_cam.inverse();
   std::vector<cv::Mat> images;
   for (const auto& cam : rig.cameras) {
@@ -131,6 +122,22 @@ TEST(FrameSetMapper, ImagesGiveTheDepthStagesDepthMasked) {
     }
     images.push_back(img);
   }
+  return images;
+}
+
+// With images, the mapper's depth is the depth stage's, masked: the same as
+// running DepthStage and maskDepthBoxes one after the other (the nodelets).
+// Images of a textured wall 8 m ahead of cam0 (plane z = 8 in cam0's frame),
+// rendered for both cameras of the rig: the depth lies on the wall, the box
+// (grown by the 10 px margin: pixel centres in [290, 410] x [90, 210], 120 x
+// 120 pixels by hand) is masked, and the mapper's depth is the depth stage's
+// run alone and masked (what the nodelets do one stage each).
+TEST(FrameSetMapper, ImagesGiveTheDepthStagesDepthMasked) {
+  const fm::Rig rig = twoCameraRig();
+  fm::FrameSetMapperConfig c = smallConfig();
+  c.depth.sweep.far = 30.0;
+  const double wall = 8.0;
+  const std::vector<cv::Mat> images = wallImages(rig, wall);
   fm::ImageBoxes boxes;
   fm::Detection box;
   box.x_min = 300, box.x_max = 400, box.y_min = 100, box.y_max = 200;
@@ -173,6 +180,69 @@ TEST(FrameSetMapper, ImagesGiveTheDepthStagesDepthMasked) {
     }
   }
   EXPECT_EQ(differ, 0u);
+}
+
+// submit(): the depth of a frame set overlaps the previous one's masking and
+// fusion, and each result (handed back a frame set late, the last by
+// flush()) is the one process() gives, in order; the map ends the same. A
+// frame set without the reference image is refused by its submit(), naming
+// the camera, and the one before it still comes back.
+TEST(FrameSetMapper, SubmitPipelinesAndGivesWhatProcessGives) {
+  const fm::Rig rig = twoCameraRig();
+  fm::FrameSetMapperConfig c = smallConfig();
+  c.depth.sweep.far = 30.0;
+  c.mesh_every = 2;
+  const std::vector<cv::Mat> images = wallImages(rig, 8.0);
+  fm::ImageBoxes boxes;
+  fm::Detection box;
+  box.x_min = 300, box.x_max = 400, box.y_min = 100, box.y_max = 200;
+  boxes.boxes = {box};
+  boxes.image_width = 1024, boxes.image_height = 544;
+  std::vector<Eigen::Isometry3d> poses;
+  for (int k = 0; k < 3; ++k) poses.push_back(Eigen::Isometry3d(Eigen::Translation3d(0.0, 0.2 * k, 0.0)));
+  fm::FrameSetMapper one(rig, c), piped(rig, c);
+  std::vector<fm::FrameSetResult> expected, got;
+  for (int k = 0; k < 3; ++k) {
+    expected.push_back(one.process(images, poses[k], boxes));
+    std::optional<fm::FrameSetResult> previous = piped.submit(images, poses[k], boxes);
+    EXPECT_EQ(previous.has_value(), k > 0) << k;
+    if (previous) got.push_back(std::move(*previous));
+  }
+  std::optional<fm::FrameSetResult> last = piped.flush();
+  ASSERT_TRUE(last);
+  got.push_back(std::move(*last));
+  EXPECT_FALSE(piped.flush());
+  ASSERT_EQ(got.size(), 3u);
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_EQ(cv::norm(got[k].mask, expected[k].mask, cv::NORM_INF), 0.0) << k;
+    EXPECT_EQ(got[k].masked_pixels, 120u * 120u) << k;
+    const cv::Mat a = got[k].depth.depth, b = expected[k].depth.depth;
+    EXPECT_EQ(cv::countNonZero((a != b) & (a == a)), 0) << k;
+    EXPECT_EQ(cv::countNonZero(a == a), cv::countNonZero(b == b)) << k;
+    EXPECT_EQ(got[k].fusion.valid_pixels, expected[k].fusion.valid_pixels) << k;
+    EXPECT_GT(got[k].ms.fuse_ms, 0.0) << k;
+    EXPECT_GE(got[k].ms.total_ms, got[k].ms.depth_ms + got[k].ms.mask_ms + got[k].ms.fuse_ms - 1e-6) << k;
+  }
+  EXPECT_EQ(piped.frameSets(), 3u);
+  one.finish();
+  piped.finish();
+  EXPECT_EQ(piped.mesher().surfaceCloud().size(), one.mesher().surfaceCloud().size());
+  EXPECT_GT(piped.mesher().surfaceCloud().size(), 1000u);
+
+  // A frame set without the reference image: refused at once, naming it; the
+  // frame set submitted before it comes back from flush().
+  fm::FrameSetMapper m(rig, c);
+  EXPECT_FALSE(m.submit(images, poses[0], boxes));
+  try {
+    m.submit({cv::Mat(), images[1]}, poses[1], boxes);
+    ADD_FAILURE() << "missing reference image accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("cam0"), std::string::npos) << e.what();
+  }
+  std::optional<fm::FrameSetResult> first = m.flush();
+  ASSERT_TRUE(first);
+  EXPECT_EQ(first->masked_pixels, 120u * 120u);
+  EXPECT_EQ(m.frameSets(), 1u);
 }
 
 TEST(FrameSetMapper, BadStageConfigurationIsNamed) {

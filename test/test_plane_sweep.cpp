@@ -427,6 +427,9 @@ class PlaneSweepScene : public ::testing::Test {
     c.resolution = resolution;
     c.min_parallax_px = 0.05;  // quarter-resolution images: a quarter of the parallax
     c.filters.cost = c.filters.uniqueness = c.filters.consistency = false;
+    // Every plane in the crop: the coarse-to-fine search follows the
+    // half-resolution winners, which float rounding moves between backends.
+    c.crop_search_planes = c.half_search_planes = 0;
     return c;
   }
 
@@ -522,7 +525,107 @@ TEST_P(PlaneSweepBackends, AgreeWithTheReferenceForBestK) {
   EXPECT_GE(costs_close, 0.97 * both);
 }
 
-INSTANTIATE_TEST_SUITE_P(Products, PlaneSweepBackends, ::testing::Values("opencl", "native"));
+INSTANTIATE_TEST_SUITE_P(Products, PlaneSweepBackends, ::testing::Values("opencl", "native"),
+                         [](const ::testing::TestParamInfo<std::string>& info) { return info.param; });
+
+// The default rig's five cameras at half resolution (512x272) on a street,
+// with a self-mask over the bottom rows (the bonnet).
+class PlaneSweepStreet : public ::testing::TestWithParam<std::string> {
+ protected:
+  static void SetUpTestSuite() {
+    rig_ = new fm::Rig(
+        fm::loadKalibrRig(FM_CONFIG_DIR "/rig/default_camchain.yaml", FM_CONFIG_DIR "/rig/default_mount.yaml"));
+    for (auto& c : rig_->cameras) c.model = c.model.scaled(0.5, 512, 272);
+    fm::synth::WorldConfig wc;
+    wc.seed = 4;
+    wc.route_length = 120;
+    const fm::synth::World world(wc);
+    const double t = 2.0;
+    for (size_t c = 0; c < rig_->cameras.size(); ++c) {
+      const auto& cam = rig_->cameras[c];
+      auto frame = world.render(cam.model, fm::pixelRays(cam.model), world.egoPose(t) * cam.T_base_cam, t, 7 + c);
+      images_.push_back(frame.image);
+      if (c == 0) truth_ = frame.depth;
+    }
+    mask_ = cv::Mat::zeros(272, 512, CV_8UC1);
+    mask_.rowRange(272 * 85 / 100, 272).setTo(255);
+  }
+  static void TearDownTestSuite() { delete rig_; }
+
+  static fm::PlaneSweepConfig config(fm::SweepBackendType backend) {
+    fm::PlaneSweepConfig c;  // multiscale, every filter on
+    c.backend = backend;
+    c.min_parallax_px = 0.1;
+    return c;
+  }
+  static fm::DepthResult run(const fm::PlaneSweepConfig& c) {
+    fm::PlaneSweep sweep(c);
+    std::vector<fm::SweepView> supports;
+    for (int i = 1; i < 5; ++i) supports.push_back(fm::rigSweepView(*rig_, i, 0, images_[i]));
+    const Eigen::Isometry3d T_base_ref = rig_->cameras[0].T_base_cam;
+    return sweep.compute(fm::rigSweepView(*rig_, 0, 0, images_[0], mask_), supports, &T_base_ref);
+  }
+
+  static fm::Rig* rig_;
+  static std::vector<cv::Mat> images_;
+  static cv::Mat truth_, mask_;
+};
+fm::Rig* PlaneSweepStreet::rig_ = nullptr;
+std::vector<cv::Mat> PlaneSweepStreet::images_;
+cv::Mat PlaneSweepStreet::truth_, PlaneSweepStreet::mask_;
+
+// Skipping the work whose result the filters drop (tiles of the self-mask,
+// textureless tiles such as the sky, ground planes in tiles above the
+// horizon) leaves the filtered depth exactly as it was, in every backend
+// (each computes the tiles it sweeps exactly as before), while sweeping
+// fewer (plane, pixel) pairs.
+TEST_P(PlaneSweepStreet, SkippedWorkLeavesTheFilteredDepthAsItWas) {
+  fm::PlaneSweepConfig every = config(fm::parseSweepBackend(GetParam()));
+  every.skip_work = false;
+  fm::PlaneSweepConfig skip = every;
+  skip.skip_work = true;
+  skip.crop_search_planes = skip.half_search_planes = 0;  // exact: no coarse-to-fine search
+  const fm::DepthResult a = run(every), b = run(skip);
+  ASSERT_EQ(a.used_views.size(), 4u);
+  EXPECT_EQ(a.swept_share, 1.0);
+  EXPECT_LT(b.swept_share, 0.85) << "the sky, the bonnet and the ground above the horizon are skipped";
+  int differ = 0, kept = 0;
+  for (int v = 0; v < a.depth.rows; ++v) {
+    for (int u = 0; u < a.depth.cols; ++u) {
+      const float x = a.depth.at<float>(v, u), y = b.depth.at<float>(v, u);
+      kept += std::isfinite(x);
+      differ += !(x == y || (std::isnan(x) && std::isnan(y)));
+    }
+  }
+  EXPECT_GT(kept, 0.1 * a.depth.total());
+  EXPECT_EQ(differ, 0) << "of " << kept << " kept pixels";
+}
+
+// Coarse-to-fine: the half resolution sweeping only the planes near the
+// quarter-resolution winners and the full-resolution crop only those near
+// the half-resolution winners (two each side, the defaults) is as accurate
+// against the rendered truth as sweeping every plane, and covers as much,
+// with less work.
+TEST_P(PlaneSweepStreet, CoarseToFineCropIsAsAccurateAsTheFullSearch) {
+  fm::PlaneSweepConfig full = config(fm::parseSweepBackend(GetParam()));
+  full.crop_search_planes = full.half_search_planes = 0;
+  fm::PlaneSweepConfig c2f = full;
+  c2f.crop_search_planes = c2f.half_search_planes = 2;
+  const fm::DepthResult a = run(full), b = run(c2f);
+  const fm::DepthErrorStats ea = fm::depthError(a.depth, truth_, mask_, 15.0, full.far);
+  const fm::DepthErrorStats eb = fm::depthError(b.depth, truth_, mask_, 15.0, full.far);
+  std::cout << "every plane in the crop: median " << ea.median << " m, mean " << ea.mean << " m, coverage "
+            << ea.coverage() << ", swept " << a.swept_share << "; coarse-to-fine: median " << eb.median
+            << " m, mean " << eb.mean << " m, coverage " << eb.coverage() << ", swept " << b.swept_share << "\n";
+  EXPECT_GT(ea.coverage(), 0.15);
+  EXPECT_LT(b.swept_share, a.swept_share - 0.1);
+  EXPECT_LE(eb.median, 1.1 * ea.median + 0.005);
+  EXPECT_LE(eb.mean, 1.1 * ea.mean + 0.01);
+  EXPECT_GE(eb.coverage(), 0.95 * ea.coverage());
+}
+
+INSTANTIATE_TEST_SUITE_P(Products, PlaneSweepStreet, ::testing::Values("opencl", "native"),
+                         [](const ::testing::TestParamInfo<std::string>& info) { return info.param; });
 
 TEST(PlaneSweepBackend, AutoTakesTheGpuElseTheNativeCpuBackend) {
   fm::PlaneSweepConfig c;

@@ -2,7 +2,7 @@
 //
 //   depth_eval synthetic --camchain F --mount F --out DIR [--preset urban|forest]
 //              [--seed N] [--frames N] [--start S] [--step S] [--backend auto|native|opencl|cpu]
-//              [--device D] [--max-range M]
+//              [--device D] [--max-range M] [--realistic] [--sweep-camchain F] [--every-plane]
 //     Renders the rig on a synthetic drive (the same world as make_drive) and
 //     compares depth with the exact rendered range of the reference camera
 //     (cam0): full / half / multi-scale without filters (paper Fig. 3), each
@@ -59,7 +59,7 @@ namespace {
 const char* kUsage =
     "usage: depth_eval synthetic --camchain F --mount F --out DIR [--preset urban|forest] [--seed N]\n"
     "                  [--frames N] [--start S] [--step S] [--backend auto|native|opencl|cpu] [--device D]\n"
-    "                  [--max-range M] [--realistic] [--sweep-camchain F]\n"
+    "                  [--max-range M] [--realistic] [--sweep-camchain F] [--every-plane]\n"
     "       depth_eval vcharge --data DIR --camera left|right --out DIR [--device D] [--ground-z Z]\n"
     "                  [--label TEXT]\n"
     "       depth_eval vcharge-check --data DIR --camera left|right --depth-k F --depth-k1 F --out DIR\n"
@@ -73,6 +73,8 @@ const char* kUsage =
     "    --realistic       render as a real rig (make_drive --realistic); the sweep gets the\n"
     "                      perturbed calibration\n"
     "    --sweep-camchain F  the sweep uses this camchain instead (e.g. refine_rig's output)\n"
+    "    --every-plane     sweep every plane at every pixel (no skipped work, no coarse-to-fine\n"
+    "                      search): the reference for what the stage's less work costs\n"
     "  vcharge: motion stereo on the V-Charge sequence in --data, checked without ground truth\n"
     "    --ground-z Z      nominal ground height in the system frame   --label TEXT  CSV code column\n"
     "  vcharge-check: the same checks on saved depth TIFFs of frames K (--k, default 2) and K+1\n"
@@ -83,11 +85,12 @@ const char* kUsage =
   std::exit(2);
 }
 
-// The options of each mode (without "--"); all take a value but --realistic.
+// The options of each mode (without "--"); all take a value but --realistic
+// and --every-plane.
 const std::map<std::string, std::set<std::string>> kModeOptions = {
     {"synthetic",
      {"camchain", "mount", "out", "preset", "seed", "frames", "start", "step", "backend", "device", "max-range",
-      "realistic", "sweep-camchain"}},
+      "realistic", "sweep-camchain", "every-plane"}},
     {"vcharge", {"data", "camera", "out", "device", "ground-z", "label"}},
     {"vcharge-check", {"data", "camera", "depth-k", "depth-k1", "out", "k", "ground-z", "label"}},
 };
@@ -97,7 +100,7 @@ std::map<std::string, std::string> parseArgs(const std::set<std::string>& known,
   fisheye_mapping::cli::forEachOption(argc, argv, first,
                                       [&](const std::string& k, const fisheye_mapping::cli::NextValue& next) {
                                         if (k.rfind("--", 0) != 0 || !known.count(k.substr(2))) return false;
-                                        a[k.substr(2)] = k == "--realistic" ? "true" : next();
+                                        a[k.substr(2)] = (k == "--realistic" || k == "--every-plane") ? "true" : next();
                                         return true;
                                       });
   return a;
@@ -188,6 +191,7 @@ int runSynthetic(const std::map<std::string, std::string>& a) {
 
   fm::PlaneSweepConfig base;
   base.backend = fm::parseSweepBackend(get(a, "backend", "auto"));
+  base.skip_work = !a.count("every-plane");
   base.device = get(a, "device", "-");
   if (base.device == "-") base.device.clear();
   fm::DepthFilterConfig none;

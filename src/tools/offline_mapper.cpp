@@ -27,6 +27,7 @@
 #include <tf2_msgs/TFMessage.h>
 
 #include <algorithm>
+#include <deque>
 #include <chrono>
 #include <cstdio>
 #include <fstream>
@@ -57,7 +58,6 @@ namespace cli = fm::cli;
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double msSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
 
 // The model YAML scripts/tools/train_vehicle_detector writes (with the score
 // threshold it chose on validation), as vehicle.launch's `finetuned_model`.
@@ -357,16 +357,55 @@ int main(int argc, char** argv) {
     calib_csv << "stamp,camera,rotvec_ref_cam_x_deg,rotvec_ref_cam_y_deg,rotvec_ref_cam_z_deg,correction_deg,"
                  "residual_deg,inliers,level,status\n";
     std::vector<double> t_sweep, t_det, t_mask, t_fuse, t_total;
-    size_t sets_seen = 0, processed = 0, skipped_pose = 0, no_boxes = 0;
+    size_t sets_seen = 0, processed = 0, submitted = 0, skipped_pose = 0, no_boxes = 0;
     const auto run_start = Clock::now();
+    std::deque<ros::Time> in_flight;  // stamps of the frame sets submitted and not yet back
+    // One frame set's result: the self-calibration's state, the depth TIFF,
+    // the timings and the progress line.
+    auto handle = [&](fm::FrameSetResult r, const ros::Time& stamp) {
+      if (r.depth.calibration_ms > 0) {
+        // The self-calibration's state after this update: each supporting
+        // camera's rotation relative to the reference, as used from now on.
+        const fm::Rig& now = *r.calibrated_rig;
+        const int cal_ref = mapper.reference();
+        for (const auto& c : r.calibration) {
+          if (c.reference) continue;
+          const Eigen::AngleAxisd aa(
+              (now.cameras[cal_ref].T_base_cam.inverse() * now.cameras[c.camera].T_base_cam).linear());
+          const Eigen::Vector3d w = aa.angle() * aa.axis() * 180.0 / M_PI;
+          std::string status = c.status;
+          std::replace(status.begin(), status.end(), ',', ';');
+          calib_csv << std::fixed << stamp.toSec() << "," << c.name << "," << w.x() << "," << w.y() << "," << w.z()
+                    << "," << c.correction_deg << "," << c.residual_deg << "," << c.inliers << ","
+                    << (c.warn ? "WARN" : "OK") << "," << status << "\n";
+        }
+      }
+      if (!save_depth.empty())
+        fm::writeDepthTiff(save_depth + "/" + std::to_string(stamp.toNSec()) + ".tiff", r.depth.depth);
+      const double sweep_ms = r.ms.depth_ms, det_ms = r.ms.detect_ms, mask_ms = r.ms.mask_ms, fuse_ms = r.ms.fuse_ms;
+      const double total = r.ms.total_ms;
+      const fm::IntegrationStats& st = r.fusion;
+      const cv::Mat& mask = r.mask;
+      t_sweep.push_back(sweep_ms), t_det.push_back(det_ms), t_mask.push_back(mask_ms), t_fuse.push_back(fuse_ms),
+          t_total.push_back(total);
+      csv << std::fixed << stamp.toSec() << "," << sweep_ms << "," << det_ms << "," << mask_ms << "," << fuse_ms << ","
+          << total << "," << st.valid_pixels << "," << cv::countNonZero(mask) << "\n";
+      ++processed;
+      if (!quiet) {
+        const double el = std::chrono::duration<double>(Clock::now() - run_start).count();
+        const int bar = total_sets ? int(30.0 * processed / total_sets) : 0;
+        std::fprintf(stderr, "\r[%-30s] %zu/%zu frame sets, %.2f s/set, ETA %.0f s   ", std::string(std::min(bar, 30), '#').c_str(),
+                     processed, total_sets, el / processed,
+                     total_sets > processed ? el / processed * (total_sets - processed) : 0.0);
+      }
+    };
     for (const rosbag::MessageInstance& m : images) {
       const std::optional<BagImage> img = BagImage::of(m);
       if (!img) continue;
       auto done = sync.add(cam_of[m.getTopic()], std::int64_t(img->header().stamp.toNSec()), *img);
       for (auto& set : done) {
         if (sets_seen++ % every != 0) continue;
-        if (max_frames > 0 && int(processed) >= max_frames) break;
-        const auto t0 = Clock::now();
+        if (max_frames > 0 && int(submitted) >= max_frames) break;
         const ros::Time stamp = set[ref_slot].header().stamp;
         Eigen::Isometry3d T_W_B;
         try {
@@ -386,53 +425,27 @@ int main(int argc, char** argv) {
             boxes = fm::ImageBoxes{std::move(d.detections), d.image_width, d.image_height};
           }
         }
-        fm::FrameSetResult r;
+        ++submitted;
         if (depth_src == "gt") {
           if (!set[0].raw) throw std::runtime_error(gt_depth_topic + " must hold sensor_msgs/Image (32FC1)");
-          r = mapper.processDepth(fm::toDepth(*set[0].raw, gt_depth_topic), T_W_B, boxes);
+          handle(mapper.processDepth(fm::toDepth(*set[0].raw, gt_depth_topic), T_W_B, boxes), stamp);
         } else {
+          // Pipelined: this set's depth while the previous one is masked and
+          // fused (and this one's detection runs); its result comes back with
+          // the next set's submit, the last with flush().
           std::vector<cv::Mat> images;
           for (size_t c = 0; c < set.size(); ++c) images.push_back(set[c].sweepImage(rig.cameras[c].name));
-          r = mapper.process(images, T_W_B, boxes);
-        }
-        if (r.depth.calibration_ms > 0) {
-          // The self-calibration's state after this update: each supporting
-          // camera's rotation relative to the reference, as used from now on.
-          const fm::OnlineRigCalibrator& cal = *mapper.depthStage().selfCalibration();
-          const fm::Rig& now = cal.rig();
-          for (const auto& c : cal.state()) {
-            if (c.reference) continue;
-            const Eigen::AngleAxisd aa(
-                (now.cameras[cal.reference()].T_base_cam.inverse() * now.cameras[c.camera].T_base_cam).linear());
-            const Eigen::Vector3d w = aa.angle() * aa.axis() * 180.0 / M_PI;
-            std::string status = c.status;
-            std::replace(status.begin(), status.end(), ',', ';');
-            calib_csv << std::fixed << stamp.toSec() << "," << c.name << "," << w.x() << "," << w.y() << "," << w.z()
-                      << "," << c.correction_deg << "," << c.residual_deg << "," << c.inliers << ","
-                      << (c.warn ? "WARN" : "OK") << "," << status << "\n";
+          in_flight.push_back(stamp);
+          std::optional<fm::FrameSetResult> previous = mapper.submit(images, T_W_B, boxes);
+          if (previous) {
+            handle(std::move(*previous), in_flight.front());
+            in_flight.pop_front();
           }
         }
-        if (!save_depth.empty())
-          fm::writeDepthTiff(save_depth + "/" + std::to_string(stamp.toNSec()) + ".tiff", r.depth.depth);
-        const double sweep_ms = r.ms.depth_ms, det_ms = r.ms.detect_ms, mask_ms = r.ms.mask_ms, fuse_ms = r.ms.fuse_ms;
-        const double total = msSince(t0);
-        const fm::IntegrationStats& st = r.fusion;
-        const cv::Mat& mask = r.mask;
-        t_sweep.push_back(sweep_ms), t_det.push_back(det_ms), t_mask.push_back(mask_ms), t_fuse.push_back(fuse_ms),
-            t_total.push_back(total);
-        csv << std::fixed << stamp.toSec() << "," << sweep_ms << "," << det_ms << "," << mask_ms << "," << fuse_ms << ","
-            << total << "," << st.valid_pixels << "," << cv::countNonZero(mask) << "\n";
-        ++processed;
-        if (!quiet) {
-          const double el = std::chrono::duration<double>(Clock::now() - run_start).count();
-          const int bar = total_sets ? int(30.0 * processed / total_sets) : 0;
-          std::fprintf(stderr, "\r[%-30s] %zu/%zu frame sets, %.2f s/set, ETA %.0f s   ", std::string(std::min(bar, 30), '#').c_str(),
-                       processed, total_sets, el / processed,
-                       total_sets > processed ? el / processed * (total_sets - processed) : 0.0);
-        }
       }
-      if (max_frames > 0 && int(processed) >= max_frames) break;
+      if (max_frames > 0 && int(submitted) >= max_frames) break;
     }
+    if (std::optional<fm::FrameSetResult> last = mapper.flush()) handle(std::move(*last), in_flight.front());
     if (!quiet) std::fprintf(stderr, "\n");
     if (processed == 0) throw std::runtime_error("no complete frame set with a pose in " + bag_path);
     const double wall = std::chrono::duration<double>(Clock::now() - run_start).count();

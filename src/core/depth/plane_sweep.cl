@@ -62,10 +62,13 @@ inline void sweep_row(__global const float* restrict warped, __global const floa
  * down the band (add the row entering the window, remove the one leaving),
  * so each output costs two window rows rather than a whole window. The
  * costs of the supporting views are aggregated into the cost volume's slice
- * for `plane`. */
+ * for `plane`; a pixel of a tile where the plane is not swept
+ * (active[(plane * tiles_y + ty) * tiles_x + tx] == 0, tiles of FM_SWEEP_TILE
+ * pixels) gets FM_COST_INVALID. */
 __kernel void sweep_cost(__global const float* restrict warped, __global const float* restrict ref,
                          __global const float* restrict ref_mean, __global const float* restrict ref_std,
                          int width, int height, int band, int mode, int k, int plane,
+                         __global const uchar* restrict active, int tiles_x, int tiles_y,
                          __global float* restrict volume) {
   int x = get_global_id(0);
   int y0 = get_global_id(1) * band;
@@ -94,7 +97,8 @@ __kernel void sweep_cost(__global const float* restrict warped, __global const f
     for (int v = 0; v < FM_SWEEP_VIEWS; ++v) {
       costs[v] = sv[v] == n ? fm_zncc_cost(n, sw[v], sww[v], swr[v], mean_r, std_r) : FM_COST_INVALID;
     }
-    out[i] = fm_aggregate(costs, FM_SWEEP_VIEWS, mode, k);
+    int on = active[((size_t)plane * tiles_y + y / FM_SWEEP_TILE) * tiles_x + x / FM_SWEEP_TILE];
+    out[i] = on ? fm_aggregate(costs, FM_SWEEP_VIEWS, mode, k) : FM_COST_INVALID;
     sweep_row(warped, ref, npix, width, height, x, y - FM_SWEEP_RADIUS, -1.0f, sw, sww, swr, sv);
   }
 }

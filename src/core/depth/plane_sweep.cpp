@@ -100,6 +100,150 @@ void windowStats(const cv::Mat& img, int radius, cv::Mat* mean, cv::Mat* stddev)
   cv::sqrt(*stddev, *stddev);
 }
 
+
+// 255 where a pixel of a level can keep a depth through the filters: it has
+// a ray (not masked, inside the camera's domain) and, with the texture
+// filter on, enough texture (`texture`: window std / noise std, NaN where no
+// ray) outside the textureless regions (`region`, the level's pixels; may be
+// empty).
+cv::Mat livePixels(const DepthFilterConfig& f, const cv::Mat& valid, const cv::Mat& texture, const cv::Mat& region) {
+  cv::Mat live = valid != 0;
+  if (!f.texture) return live;
+  live &= texture >= f.min_texture_snr;  // NaN compares false
+  if (!region.empty()) live &= region == 0;
+  return live;
+}
+
+// The half-resolution (hw x hh) pixels all of whose 2x2 full-resolution
+// pixels are set (CV_8UC1, 255); a last odd column or row counts what it has.
+cv::Mat allOfQuads(const cv::Mat& full, int hw, int hh) {
+  cv::Mat out(hh, hw, CV_8UC1);
+  for (int y = 0; y < hh; ++y) {
+    const uint8_t* a = full.ptr<uint8_t>(std::min(2 * y, full.rows - 1));
+    const uint8_t* b = full.ptr<uint8_t>(std::min(2 * y + 1, full.rows - 1));
+    uint8_t* o = out.ptr<uint8_t>(y);
+    for (int x = 0; x < hw; ++x) {
+      const int u0 = std::min(2 * x, full.cols - 1), u1 = std::min(2 * x + 1, full.cols - 1);
+      o[x] = (a[u0] && a[u1] && b[u0] && b[u1]) ? 255 : 0;
+    }
+  }
+  return out;
+}
+
+// The (plane, pixel) pairs an activity sweeps (tiles at the right and
+// bottom edge count the pixels they have).
+double sweptPairs(const std::vector<uint8_t>& active, int w, int h, int tiles_x, int tiles_y) {
+  const size_t tiles = static_cast<size_t>(tiles_x) * tiles_y;
+  double pairs = 0.0;
+  for (size_t i = 0; i < active.size(); ++i) {
+    if (!active[i]) continue;
+    const int t = static_cast<int>(i % tiles), tx = t % tiles_x, ty = t / tiles_x;
+    pairs += static_cast<double>(std::min(FM_SWEEP_TILE, w - tx * FM_SWEEP_TILE)) *
+             std::min(FM_SWEEP_TILE, h - ty * FM_SWEEP_TILE);
+  }
+  return pairs;
+}
+
+// The coarser scale's result a finer one searches around (the half
+// resolution for the crop, PlaneSweepConfig::crop_search_planes; the quarter
+// resolution for the half, half_search_planes): pixel (x, y) of the finer
+// level lies at ((x0 + x) / 2, (y0 + y) / 2) of the coarser.
+struct CoarsePrior {
+  cv::Mat range;                    // CV_32FC1 range at the coarser scale, NaN where none
+  const std::vector<float>* rays = nullptr;  // 3 per pixel of the coarser scale
+  int x0 = 0, y0 = 0;               // the finer level's origin, pixels of twice the coarser scale
+  int planes_each_side = 2;
+};
+
+// SweepLevel::active for a level of w x h pixels with rays `rays` (3 per
+// pixel, zero where none) and the pixels that can keep a depth (`live`): a
+// plane is swept in a tile when the tile has a live pixel, for ground planes
+// a live pixel whose ray meets the plane (every ground plane has the same
+// normal and a positive offset, so they meet the same rays), and, with a
+// prior, the plane lies within prior->planes_each_side planes of its family
+// of a coarser scale's winner under the tile or beside it (every plane when
+// there is none).
+std::vector<uint8_t> planeActivity(const PlaneSweepConfig& config, const cv::Mat& live, const std::vector<float>& rays,
+                                   const std::vector<FmSweepPlane>& planes, const CoarsePrior* prior, int* tiles_x,
+                                   int* tiles_y) {
+  const int w = live.cols, h = live.rows, T = FM_SWEEP_TILE;
+  const int tx_n = (w + T - 1) / T, ty_n = (h + T - 1) / T;
+  *tiles_x = tx_n;
+  *tiles_y = ty_n;
+  const size_t tiles = static_cast<size_t>(tx_n) * ty_n;
+  const int n = static_cast<int>(planes.size());
+  int n_fronto = 0, first_ground = -1;
+  for (int j = 0; j < n; ++j) {
+    if (planes[j].family == FM_FAMILY_FRONTO) ++n_fronto;
+    if (planes[j].family == FM_FAMILY_GROUND && first_ground < 0) first_ground = j;
+  }
+  const int n_ground = first_ground < 0 ? 0 : n - first_ground;
+  // Plane spacing of each family: fronto uniform in inverse depth, ground in
+  // offset (makeSweepPlanes).
+  const double inv_near = 1.0 / config.near, inv_far = 1.0 / config.far;
+  const double ground_step =
+      config.ground_planes > 1 ? (config.ground_max - config.ground_min) / (config.ground_planes - 1) : 1.0;
+  std::vector<uint8_t> active(tiles * n, 0);
+  std::vector<uint8_t> wanted(n);
+  for (int ty = 0; ty < ty_n; ++ty) {
+    for (int tx = 0; tx < tx_n; ++tx) {
+      bool any_live = false, ground_hit = false;
+      for (int y = ty * T; y < std::min(h, (ty + 1) * T); ++y) {
+        const uint8_t* l = live.ptr<uint8_t>(y);
+        for (int x = tx * T; x < std::min(w, (tx + 1) * T); ++x) {
+          if (!l[x]) continue;
+          any_live = true;
+          if (first_ground >= 0 && !ground_hit) {
+            const float* r = &rays[3 * (static_cast<size_t>(y) * w + x)];
+            ground_hit = fm_plane_inverse_range(planes[first_ground], r[0], r[1], r[2]) > 0.0f;
+          }
+        }
+      }
+      if (!any_live) continue;
+      std::fill(wanted.begin(), wanted.end(), prior ? 0 : 1);
+      if (prior) {
+        // The coarser scale's pixels under the tile and one beside it.
+        const cv::Mat& hr = prior->range;
+        const int K = prior->planes_each_side;
+        const int hx0 = std::max(0, (prior->x0 + tx * T) / 2 - 1);
+        const int hx1 = std::min(hr.cols - 1, (prior->x0 + std::min(w, (tx + 1) * T) - 1) / 2 + 1);
+        const int hy0 = std::max(0, (prior->y0 + ty * T) / 2 - 1);
+        const int hy1 = std::min(hr.rows - 1, (prior->y0 + std::min(h, (ty + 1) * T) - 1) / 2 + 1);
+        bool any_winner = false;
+        for (int y = hy0; y <= hy1; ++y) {
+          for (int x = hx0; x <= hx1; ++x) {
+            const float t = hr.at<float>(y, x);
+            if (!std::isfinite(t)) continue;
+            any_winner = true;
+            const float* r = &(*prior->rays)[3 * (static_cast<size_t>(y) * hr.cols + x)];
+            const double px = t * r[0], py = t * r[1], pz = t * r[2];
+            if (pz > 0.0 && n_fronto > 1) {  // fronto: index of inverse depth 1 / z
+              const double fi = std::clamp((inv_near - 1.0 / pz) / (inv_near - inv_far) * (n_fronto - 1), -1e6, 1e6);
+              const int lo = std::max(0, static_cast<int>(std::floor(fi)) - K);
+              const int hi = std::min(n_fronto - 1, static_cast<int>(std::ceil(fi)) + K);
+              for (int j = lo; j <= hi; ++j) wanted[j] = 1;
+            }
+            if (n_ground > 0) {  // ground: offset n . P against d_i = d_0 - step * i
+              const FmSweepPlane& g0 = planes[first_ground];
+              const double g = g0.nx * px + g0.ny * py + g0.nz * pz;
+              const double gi = std::clamp((g0.d - g) / ground_step, -1e6, 1e6);
+              const int lo = std::max(0, static_cast<int>(std::floor(gi)) - K);
+              const int hi = std::min(n_ground - 1, static_cast<int>(std::ceil(gi)) + K);
+              for (int j = lo; j <= hi; ++j) wanted[first_ground + j] = 1;
+            }
+          }
+        }
+        if (!any_winner) std::fill(wanted.begin(), wanted.end(), 1);
+      }
+      const size_t tile = static_cast<size_t>(ty) * tx_n + tx;
+      for (int j = 0; j < n; ++j) {
+        const bool meets = planes[j].family != FM_FAMILY_GROUND || ground_hit;
+        active[j * tiles + tile] = (wanted[j] && meets) ? 1 : 0;
+      }
+    }
+  }
+  return active;
+}
 }  // namespace
 
 std::vector<FmSweepPlane> makeSweepPlanes(const PlaneSweepConfig& config, const Eigen::Isometry3d* T_base_ref) {
@@ -238,18 +382,43 @@ DepthResult PlaneSweep::compute(const SweepView& ref, const std::vector<SweepVie
   result.uniqueness = cv::Mat(H, W, CV_32FC1, cv::Scalar(NAN));
   if (!used.empty()) {
     const std::vector<FmSweepPlane> planes = makeSweepPlanes(config_, T_base_ref);
+    // The quarter resolution, which only guides the half, sweeps every other
+    // plane of each family (and each family's last): its winners place the
+    // half's search to within a plane of the half's spacing either way.
+    std::vector<FmSweepPlane> quarter_planes;
+    for (size_t j = 0; j < planes.size(); ++j) {
+      int index = 0;  // index within the family
+      while (index < static_cast<int>(j) && planes[j - index - 1].family == planes[j].family) ++index;
+      const bool last = j + 1 == planes.size() || planes[j + 1].family != planes[j].family;
+      if (index % 2 == 0 || last) quarter_planes.push_back(planes[j]);
+    }
     const cv::Mat ref_full = toSweepImage(ref.image, ref.name);
     std::vector<cv::Mat> img_full, mask_full;
     for (int i : used) {
       img_full.push_back(toSweepImage(supports[i].image, supports[i].name));
       mask_full.push_back(maskWithNonFinite(checkedMask(supports[i]), supports[i], &result.warnings));
     }
+    // Textureless regions (sky, blank walls): a window that reaches across
+    // their edge matches the edge, so the whole region goes, grown by 2 px.
+    unsigned full_version = 0;
+    raysFor(0, ref.camera, ref_mask, &full_version);
+    const cv::Mat region = texturelessRegions(ref_full, rays_[0].valid, config_.filters.min_texture_snr,
+                                              config_.filters.min_noise_std, config_.window_full);
+    // The full-resolution centre crop.
+    const int cw = std::min(W, static_cast<int>(std::lround(config_.crop_width * W)));
+    const int ch = std::min(H, static_cast<int>(std::lround(config_.crop_height * H)));
+    const cv::Rect roi(std::clamp(static_cast<int>(std::lround(ref.camera.params().cx + 0.5 - cw / 2.0)), 0, W - cw),
+                       std::clamp(static_cast<int>(std::lround(ref.camera.params().cy + 0.5 - ch / 2.0)), 0, H - ch),
+                       cw, ch);
+    double all_pairs = 0.0, swept_pairs = 0.0;  // (plane, pixel) pairs: DepthResult::swept_share
     // One scale: slot 0 full view, 1 half view, 2 full-resolution crop.
-    auto run = [&](int slot, cv::Mat* range, cv::Mat* cost, cv::Mat* ratio, cv::Mat* texture) {
+    // *live gets the level's pixels that can keep a depth (livePixels).
+    auto run = [&](int slot, const CoarsePrior* prior, cv::Mat* range, cv::Mat* cost, cv::Mat* ratio, cv::Mat* texture,
+                   cv::Mat* live) {
       SweepLevel level;
       level.id = slot;
       CameraModel cam = ref.camera;
-      cv::Mat ref_img = ref_full, rmask = ref_mask;
+      cv::Mat ref_img = ref_full, rmask = ref_mask, level_region = region;
       const bool half = slot == 1;
       if (half) {
         const int hw = W / 2, hh = H / 2;
@@ -257,21 +426,25 @@ DepthResult PlaneSweep::compute(const SweepView& ref, const std::vector<SweepVie
         cv::resize(ref_full, ref_img, cv::Size(hw, hh), 0, 0, cv::INTER_AREA);
         cv::resize(ref_mask, rmask, cv::Size(hw, hh), 0, 0, cv::INTER_AREA);
         rmask = rmask != 0;  // any masked pixel under a half-resolution pixel masks it
+        level_region = allOfQuads(region, hw, hh);  // dropped at all four of its pixels
+      } else if (slot == 3) {
+        const int qw = W / 4, qh = H / 4;
+        cam = ref.camera.scaled(0.25, qw, qh);
+        cv::resize(ref_full, ref_img, cv::Size(qw, qh), 0, 0, cv::INTER_AREA);
+        cv::resize(ref_mask, rmask, cv::Size(qw, qh), 0, 0, cv::INTER_AREA);
+        rmask = rmask != 0;
+        level_region = allOfQuads(allOfQuads(region, W / 2, H / 2), qw, qh);
       } else if (slot == 2) {
-        const int cw = std::min(W, static_cast<int>(std::lround(config_.crop_width * W)));
-        const int ch = std::min(H, static_cast<int>(std::lround(config_.crop_height * H)));
-        const int x0 = std::clamp(static_cast<int>(std::lround(ref.camera.params().cx + 0.5 - cw / 2.0)), 0, W - cw);
-        const int y0 = std::clamp(static_cast<int>(std::lround(ref.camera.params().cy + 0.5 - ch / 2.0)), 0, H - ch);
-        cam = ref.camera.cropped(x0, y0, cw, ch);
-        const cv::Rect roi(x0, y0, cw, ch);
+        cam = ref.camera.cropped(roi.x, roi.y, roi.width, roi.height);
         ref_img = ref_full(roi).clone();
         rmask = ref_mask(roi).clone();
+        level_region = region(roi);
       }
       level.rays = &raysFor(slot, cam, rmask, &level.rays_version);
       level.width = cam.width();
       level.height = cam.height();
       level.ref = ref_img;
-      level.radius = (half ? config_.window_half : config_.window_full) / 2;
+      level.radius = (slot == 3 ? config_.window_quarter : half ? config_.window_half : config_.window_full) / 2;
       windowStats(ref_img, level.radius, &level.ref_mean, &level.ref_std);
       // Texture against this scale's own noise (averaging to half resolution
       // halves it), over the pixels with a ray that is not masked.
@@ -279,16 +452,32 @@ DepthResult PlaneSweep::compute(const SweepView& ref, const std::vector<SweepVie
       const double noise = std::max(estimateNoiseStd(ref_img, valid), config_.filters.min_noise_std);
       level.ref_std.convertTo(*texture, CV_32F, 1.0 / noise);
       texture->setTo(NAN, valid == 0);
+      // The quarter resolution only guides the half: every pixel with a ray
+      // outside the textureless regions (a texture too weak for its window
+      // can still be enough for the half's).
+      DepthFilterConfig live_filters = config_.filters;
+      if (slot == 3) live_filters.min_texture_snr = 0.0;
+      *live = livePixels(live_filters, valid, *texture, level_region);
+      const std::vector<FmSweepPlane>& level_planes = slot == 3 ? quarter_planes : planes;
+      const double pairs = static_cast<double>(level.width) * level.height * level_planes.size();
+      if (slot != 3) all_pairs += pairs;  // the quarter resolution is work on top
+      swept_pairs += pairs;
+      if (config_.skip_work) {
+        level.active =
+            planeActivity(config_, *live, *level.rays, level_planes, prior, &level.tiles_x, &level.tiles_y);
+        swept_pairs -= pairs - sweptPairs(level.active, level.width, level.height, level.tiles_x, level.tiles_y);
+      }
       for (size_t k = 0; k < used.size(); ++k) {
         const SweepView& s = supports[used[k]];
         const Eigen::Isometry3d T_view_ref = s.T_ref_view.inverse();
-        if (half) {
-          const int sw = s.camera.width() / 2, sh = s.camera.height() / 2;
-          level.cameras.push_back(s.camera.scaled(0.5, sw, sh).floatParams());
+        if (half || slot == 3) {
+          const int f = half ? 2 : 4;
+          const int sw = s.camera.width() / f, sh = s.camera.height() / f;
+          level.cameras.push_back(s.camera.scaled(1.0 / f, sw, sh).floatParams());
           cv::Mat im, mk;
           cv::resize(img_full[k], im, cv::Size(sw, sh), 0, 0, cv::INTER_AREA);
           cv::resize(mask_full[k], mk, cv::Size(sw, sh), 0, 0, cv::INTER_AREA);
-          im.setTo(-1.0f, mk != 0);  // any masked pixel under a half-resolution pixel masks it
+          im.setTo(-1.0f, mk != 0);  // any masked pixel under a coarser pixel masks it
           level.images.push_back(im);
         } else {
           level.cameras.push_back(s.camera.floatParams());
@@ -298,26 +487,45 @@ DepthResult PlaneSweep::compute(const SweepView& ref, const std::vector<SweepVie
         }
         level.poses.push_back(toViewPose(T_view_ref));
       }
-      backend_->sweep(level, planes, config_, range, cost, ratio);
+      backend_->sweep(level, level_planes, config_, range, cost, ratio);
       return cam;
     };
-    cv::Mat range, cost, ratio, texture;
+    cv::Mat range, cost, ratio, texture, live;
     if (config_.resolution == SweepResolution::Full) {
-      run(0, &result.raw_depth, &result.cost, &result.uniqueness, &result.texture);
+      run(0, nullptr, &result.raw_depth, &result.cost, &result.uniqueness, &result.texture, &live);
     } else {
-      run(1, &range, &cost, &ratio, &texture);
+      CoarsePrior quarter;
+      const bool use_quarter = config_.skip_work && config_.half_search_planes > 0;
+      if (use_quarter) {
+        run(3, nullptr, &range, &cost, &ratio, &texture, &live);
+        quarter.range = range.clone();
+        quarter.rays = &rays_[3].rays;
+        quarter.planes_each_side = config_.half_search_planes;
+      }
+      run(1, use_quarter ? &quarter : nullptr, &range, &cost, &ratio, &texture, &live);
       result.raw_depth = upsampleNearest(range, W, H);
       result.cost = upsampleNearest(cost, W, H);
       result.uniqueness = upsampleNearest(ratio, W, H);
       result.texture = upsampleNearest(texture, W, H);
       if (config_.resolution == SweepResolution::Multiscale) {
-        const CameraModel crop = run(2, &range, &cost, &ratio, &texture);
-        const int x0 = static_cast<int>(std::lround(ref.camera.params().cx - crop.params().cx));
-        const int y0 = static_cast<int>(std::lround(ref.camera.params().cy - crop.params().cy));
+        CoarsePrior prior;
+        prior.range = range.clone();
+        prior.rays = &rays_[1].rays;
+        prior.x0 = roi.x;
+        prior.y0 = roi.y;
+        prior.planes_each_side = config_.crop_search_planes;
+        run(2, config_.crop_search_planes > 0 ? &prior : nullptr, &range, &cost, &ratio, &texture, &live);
+        const int x0 = roi.x, y0 = roi.y;
         for (int v = 0; v < range.rows; ++v) {
           for (int u = 0; u < range.cols; ++u) {
             const float d = range.at<float>(v, u);
-            if (!std::isfinite(d)) continue;  // the crop wins where it is valid
+            if (!std::isfinite(d)) {
+              // In the crop its own, finer texture decides, also where it
+              // has no depth (so skipping the crop's dead tiles changes
+              // nothing).
+              if (config_.filters.texture && !live.at<uint8_t>(v, u)) result.texture.at<float>(y0 + v, x0 + u) = 0.0f;
+              continue;  // the crop wins where it is valid
+            }
             result.raw_depth.at<float>(y0 + v, x0 + u) = d;
             result.cost.at<float>(y0 + v, x0 + u) = cost.at<float>(v, u);
             result.uniqueness.at<float>(y0 + v, x0 + u) = ratio.at<float>(v, u);
@@ -326,13 +534,8 @@ DepthResult PlaneSweep::compute(const SweepView& ref, const std::vector<SweepVie
         }
       }
     }
-    // Textureless regions (sky, blank walls): a window that reaches across
-    // their edge matches the edge, so the whole region goes, grown by 2 px.
-    unsigned full_version = 0;
-    raysFor(0, ref.camera, ref_mask, &full_version);
-    const cv::Mat region = texturelessRegions(ref_full, rays_[0].valid, config_.filters.min_texture_snr,
-                                              config_.filters.min_noise_std, config_.window_full);
     result.texture.setTo(0.0f, region);
+    result.swept_share = all_pairs > 0.0 ? swept_pairs / all_pairs : 1.0;
     // The depth range is a range along the ray, like the output.
     const float near = static_cast<float>(config_.near), far = static_cast<float>(config_.far);
     for (int v = 0; v < H; ++v) {

@@ -65,6 +65,13 @@ class ClSweepBackend : public SweepBackend {
     upload(&s.ref, img_bytes, ref.ptr<float>());
     upload(&s.mean, img_bytes, mean.ptr<float>());
     upload(&s.stdev, img_bytes, stdev.ptr<float>());
+    // Plane activity per tile (SweepLevel::active; all ones when empty).
+    const int tiles_x = level.active.empty() ? (w + FM_SWEEP_TILE - 1) / FM_SWEEP_TILE : level.tiles_x;
+    const int tiles_y = level.active.empty() ? (h + FM_SWEEP_TILE - 1) / FM_SWEEP_TILE : level.tiles_y;
+    const size_t tiles = static_cast<size_t>(tiles_x) * tiles_y;
+    active_host_ = level.active;
+    if (active_host_.empty()) active_host_.assign(tiles * n_planes, 1);
+    upload(&s.active, active_host_.size(), active_host_.data());
     reserve(&s.warped, static_cast<size_t>(views) * img_bytes, CL_MEM_READ_WRITE);
     reserve(&s.volume, static_cast<size_t>(n_planes) * img_bytes, CL_MEM_READ_WRITE);
     reserve(&s.range, img_bytes, CL_MEM_WRITE_ONLY);
@@ -91,12 +98,20 @@ class ClSweepBackend : public SweepBackend {
     cost_.setArg(6, band);
     cost_.setArg(7, config.aggregation == SweepAggregation::BestK ? FM_AGGREGATE_BEST_K : FM_AGGREGATE_AVERAGE);
     cost_.setArg(8, config.best_k);
-    cost_.setArg(10, s.volume.buffer);
+    cost_.setArg(10, s.active.buffer);
+    cost_.setArg(11, tiles_x);
+    cost_.setArg(12, tiles_y);
+    cost_.setArg(13, s.volume.buffer);
     const cl::NDRange warp_global(npix);
     const cl::NDRange cost_global(w, (h + band - 1) / band);
     for (int p = 0; p < n_planes; ++p) {
-      warp_.setArg(3, p);
-      q.enqueueNDRangeKernel(warp_, cl::NullRange, warp_global, cl::NullRange);
+      // A plane swept in no tile needs no samples: sweep_cost only writes
+      // FM_COST_INVALID for it.
+      const uint8_t* a = active_host_.data() + p * tiles;
+      if (std::any_of(a, a + tiles, [](uint8_t x) { return x != 0; })) {
+        warp_.setArg(3, p);
+        q.enqueueNDRangeKernel(warp_, cl::NullRange, warp_global, cl::NullRange);
+      }
       cost_.setArg(9, p);
       q.enqueueNDRangeKernel(cost_, cl::NullRange, cost_global, cl::NullRange);
     }
@@ -126,7 +141,7 @@ class ClSweepBackend : public SweepBackend {
     size_t capacity = 0;
   };
   struct Slot {
-    Buf rays, images, planes, cams, poses, offsets, ref, mean, stdev, warped, volume, range, cost, ratio;
+    Buf rays, images, planes, cams, poses, offsets, ref, mean, stdev, warped, volume, range, cost, ratio, active;
     unsigned rays_version = 0;
     int rays_pixels = -1;
   };
@@ -162,9 +177,10 @@ class ClSweepBackend : public SweepBackend {
 
   OpenClContext ctx_;
   std::map<int, Kernels> kernels_;
-  Slot slots_[3];
+  Slot slots_[4];
   std::vector<int> offsets_host_;
   std::vector<float> images_host_;
+  std::vector<uint8_t> active_host_;
 };
 
 }  // namespace

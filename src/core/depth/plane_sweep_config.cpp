@@ -144,6 +144,14 @@ const ParamTable<PlaneSweepConfig>& PlaneSweepConfig::params() {
                 "Width of the full-resolution centre crop, fraction of the image")
         .number("crop_height", [](C& c) -> double& { return c.crop_height; }, R::aboveUpTo(0, 1), "",
                 "Height of the full-resolution centre crop, fraction of the image")
+        .number("crop_search_planes", [](C& c) -> int& { return c.crop_search_planes; }, R::atLeast(0), "",
+                "Multiscale: the crop sweeps, per 8x8 tile, only the planes within this many of the half-resolution "
+                "winners there (0: every plane)")
+        .number("half_search_planes", [](C& c) -> int& { return c.half_search_planes; }, R::atLeast(0), "",
+                "Half resolution: after a quarter-resolution sweep of every other plane, sweep per 8x8 tile only the "
+                "planes within this many of its winners there (0: no quarter-resolution sweep, every plane)")
+        .number("window_quarter", [](C& c) -> int& { return c.window_quarter; }, R::atLeast(3), "px",
+                "Matching window of the quarter-resolution sweep (odd)")
         .number("min_parallax_px", [](C& c) -> double& { return c.min_parallax_px; }, R::atLeast(0), "px",
                 "Smallest parallax per plane (pixels of the coarser image) of a supporting view", kRun)
         .number("min_parallax_ratio", [](C& c) -> double& { return c.min_parallax_ratio; }, R::between(0, 1), "",
@@ -164,6 +172,7 @@ const ParamTable<PlaneSweepConfig>& PlaneSweepConfig::params() {
         requireInRange("ground_max", ParamRange::above(c.ground_min), c.ground_max, "m (greater than ground_min)");
       require(c.window_full % 2 == 1, "window_full", "must be odd, got " + std::to_string(c.window_full));
       require(c.window_half % 2 == 1, "window_half", "must be odd, got " + std::to_string(c.window_half));
+      require(c.window_quarter % 2 == 1, "window_quarter", "must be odd, got " + std::to_string(c.window_quarter));
       require(c.band_rows >= 1, "band_rows", "must be at least 1");
     });
     return t;

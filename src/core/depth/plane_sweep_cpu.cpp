@@ -61,7 +61,11 @@ class CpuSweepBackend : public SweepBackend {
                                       level.ref_mean.at<float>(y, x), level.ref_std.at<float>(y, x));
             }
           }
-          volume[static_cast<size_t>(p) * npix + y * w + x] = fm_aggregate(costs, views, mode, config.best_k);
+          const bool on = level.active.empty() ||
+                          level.active[(static_cast<size_t>(p) * level.tiles_y + y / FM_SWEEP_TILE) * level.tiles_x +
+                                       x / FM_SWEEP_TILE] != 0;
+          volume[static_cast<size_t>(p) * npix + y * w + x] =
+              on ? fm_aggregate(costs, views, mode, config.best_k) : FM_COST_INVALID;
         }
       }
     }

@@ -14,6 +14,9 @@
 //     every pixel without running sums (no float drift along a column);
 //   - a plane that meets none of a row's rays (ground planes above the
 //     horizon) costs one dot product per pixel;
+//   - per plane, only the tiles the level's activity marks are swept (the
+//     runs of their columns in each tile row, with the window's margin), so
+//     that skipped tiles cost nothing;
 //   - the loops are compiled twice, for the x86-64 baseline and for
 //     AVX2 + FMA (chosen at run time when the CPU has them), so one binary
 //     runs everywhere and uses 8-wide vectors where it can.
@@ -22,6 +25,7 @@
 #include <cstdlib>
 #include <cstdint>
 #include <cstring>
+#include <utility>
 #include <vector>
 
 #include <omp.h>
@@ -45,6 +49,8 @@ struct NativeLevel {
   const FmViewPose* poses = nullptr;
   const uint16_t* const* quads = nullptr;  // per view: 4 units per pixel (see loadQuads)
   const FmSweepPlane* planes = nullptr;
+  const uint8_t* active = nullptr;  // SweepLevel::active (planes x tiles), nullptr: every plane everywhere
+  int tiles_x = 0, tiles_y = 0;
   float* out_range = nullptr;  // w x h each
   float* out_cost = nullptr;
   float* out_ratio = nullptr;
@@ -176,6 +182,11 @@ class NativeSweepBackend : public SweepBackend {
     L.poses = level.poses.data();
     L.quads = quad_ptrs.data();
     L.planes = planes.data();
+    if (!level.active.empty()) {
+      L.active = level.active.data();
+      L.tiles_x = level.tiles_x;
+      L.tiles_y = level.tiles_y;
+    }
     L.out_range = range->ptr<float>();
     L.out_cost = cost->ptr<float>();
     L.out_ratio = ratio->ptr<float>();
@@ -201,7 +212,7 @@ class NativeSweepBackend : public SweepBackend {
 
   bool avx2_, avx512_;
   std::vector<std::vector<uint16_t>> quads_;
-  Soa soa_[3];
+  Soa soa_[4];
 };
 
 }  // namespace

@@ -20,6 +20,8 @@ struct Scratch {
   std::vector<float> agg_sum;                 // mean aggregation: sums and counts per band pixel
   std::vector<int> agg_n;
   std::vector<float> volume;                  // cost volume of the band, planes x band rows
+  std::vector<std::vector<std::pair<int, int>>> tile_runs;  // per plane and tile row of the band: swept columns
+  std::vector<std::pair<int, int>> row_runs;  // a warped row's columns (the tile runs widened by r)
 };
 
 // The four pixels of every bilinear sample of a row, from the view's quad
@@ -173,67 +175,123 @@ inline void rowSums(const float* __restrict warped, const float* __restrict ref,
   boxRow(p3, h3, t, w, r);
 }
 
-// out[x] = sum of rows 0 .. 2r of a (rows of w floats), the rows' count a
-// template argument as in boxRowT.
+// out[x] = sum of rows 0 .. 2r of a (rows `stride` floats apart) for x in
+// [0, len), the rows' count a template argument as in boxRowT.
 template <int R>
-FM_NATIVE_INLINE void boxColumnT(const float* __restrict a, float* __restrict out, int w) {
-  for (int x = 0; x < w; ++x) {
+FM_NATIVE_INLINE void boxColumnT(const float* __restrict a, float* __restrict out, int len, size_t stride) {
+  for (int x = 0; x < len; ++x) {
     float sum = 0.0f;
-    for (int dy = 0; dy <= 2 * R; ++dy) sum += a[static_cast<size_t>(dy) * w + x];
+    for (int dy = 0; dy <= 2 * R; ++dy) sum += a[dy * stride + x];
     out[x] = sum;
   }
 }
 
-inline void boxColumn(const float* __restrict a, float* __restrict out, int w, int r) {
+inline void boxColumn(const float* __restrict a, float* __restrict out, int len, size_t stride, int r) {
   switch (r) {
-    case 1: boxColumnT<1>(a, out, w); return;
-    case 2: boxColumnT<2>(a, out, w); return;
-    case 3: boxColumnT<3>(a, out, w); return;
-    case 4: boxColumnT<4>(a, out, w); return;
-    case 5: boxColumnT<5>(a, out, w); return;
-    case 6: boxColumnT<6>(a, out, w); return;
-    case 7: boxColumnT<7>(a, out, w); return;
+    case 1: boxColumnT<1>(a, out, len, stride); return;
+    case 2: boxColumnT<2>(a, out, len, stride); return;
+    case 3: boxColumnT<3>(a, out, len, stride); return;
+    case 4: boxColumnT<4>(a, out, len, stride); return;
+    case 5: boxColumnT<5>(a, out, len, stride); return;
+    case 6: boxColumnT<6>(a, out, len, stride); return;
+    case 7: boxColumnT<7>(a, out, len, stride); return;
     default:
-      for (int x = 0; x < w; ++x) out[x] = a[x];
+      for (int x = 0; x < len; ++x) out[x] = a[x];
       for (int dy = 1; dy <= 2 * r; ++dy) {
-        const float* __restrict row = a + static_cast<size_t>(dy) * w;
-        for (int x = 0; x < w; ++x) out[x] += row[x];
+        const float* __restrict row = a + dy * stride;
+        for (int x = 0; x < len; ++x) out[x] += row[x];
       }
   }
 }
 
 // s[x] += add[x] - sub[x]: the vertical window moved down one row.
-inline void slideColumn(float* __restrict sum, const float* __restrict add, const float* __restrict sub, int w) {
-  for (int x = 0; x < w; ++x) sum[x] += add[x] - sub[x];
+inline void slideColumn(float* __restrict sum, const float* __restrict add, const float* __restrict sub, int len) {
+  for (int x = 0; x < len; ++x) sum[x] += add[x] - sub[x];
 }
 
 // Vertical window sums of the horizontal sums for output row `j` of the band
-// (rows j .. j + 2r of the band's buffers): summed afresh for j = 0, then
-// slid down a row at a time (sums of at most band + 2r rows: float drift
-// stays far under the cost tolerance; the usable count stays exact), and the
-// ZNCC cost of every pixel of the row.
-inline void costRow(const Scratch& s, int w, int r, int j, const float* __restrict mean,
+// (rows j .. j + 2r of the band's buffers, w floats a row), columns
+// [a, a + len): summed afresh when `fresh` (the band's first row and the
+// first row of every tile row, so that the sums do not depend on which
+// columns the rows before were swept at), else slid down a row from row j - 1
+// (sums of at most FM_SWEEP_TILE + 2r rows: float drift stays far under the
+// cost tolerance; the usable count stays exact), and the ZNCC cost of those
+// pixels (cost, mean and stdev point at column 0 of the row).
+inline void costRun(const Scratch& s, int w, int r, int j, int a, int len, bool fresh, const float* __restrict mean,
                     const float* __restrict stdev, float* __restrict cost, Scratch* tmp) {
-  float* __restrict s0 = tmp->p0.data();
-  float* __restrict s1 = tmp->p1.data();
-  float* __restrict s2 = tmp->p2.data();
-  float* __restrict s3 = tmp->p3.data();
-  if (j == 0) {
-    boxColumn(s.h0.data(), s0, w, r);
-    boxColumn(s.h1.data(), s1, w, r);
-    boxColumn(s.h2.data(), s2, w, r);
-    boxColumn(s.h3.data(), s3, w, r);
+  float* __restrict s0 = tmp->p0.data() + a;
+  float* __restrict s1 = tmp->p1.data() + a;
+  float* __restrict s2 = tmp->p2.data() + a;
+  float* __restrict s3 = tmp->p3.data() + a;
+  const size_t stride = static_cast<size_t>(w);
+  if (fresh) {
+    const size_t o = static_cast<size_t>(j) * w + a;
+    boxColumn(s.h0.data() + o, s0, len, stride, r);
+    boxColumn(s.h1.data() + o, s1, len, stride, r);
+    boxColumn(s.h2.data() + o, s2, len, stride, r);
+    boxColumn(s.h3.data() + o, s3, len, stride, r);
   } else {
-    const size_t in = static_cast<size_t>(j + 2 * r) * w, out = static_cast<size_t>(j - 1) * w;
-    slideColumn(s0, s.h0.data() + in, s.h0.data() + out, w);
-    slideColumn(s1, s.h1.data() + in, s.h1.data() + out, w);
-    slideColumn(s2, s.h2.data() + in, s.h2.data() + out, w);
-    slideColumn(s3, s.h3.data() + in, s.h3.data() + out, w);
+    const size_t in = static_cast<size_t>(j + 2 * r) * w + a, out = static_cast<size_t>(j - 1) * w + a;
+    slideColumn(s0, s.h0.data() + in, s.h0.data() + out, len);
+    slideColumn(s1, s.h1.data() + in, s.h1.data() + out, len);
+    slideColumn(s2, s.h2.data() + in, s.h2.data() + out, len);
+    slideColumn(s3, s.h3.data() + in, s.h3.data() + out, len);
   }
   const float n = static_cast<float>((2 * r + 1) * (2 * r + 1));
-  for (int x = 0; x < w; ++x) {
+  mean += a;
+  stdev += a;
+  cost += a;
+  for (int x = 0; x < len; ++x) {
     const float c = fm_zncc_cost(n, s0[x], s1[x], s2[x], mean[x], stdev[x]);
     cost[x] = s3[x] == n ? c : FM_COST_INVALID;
+  }
+}
+
+// Column runs [first, second) of a list, merged where they touch or overlap.
+using Runs = std::vector<std::pair<int, int>>;
+inline void mergeRuns(Runs* runs) {
+  if (runs->size() < 2) return;
+  std::sort(runs->begin(), runs->end());
+  size_t k = 0;
+  for (size_t i = 1; i < runs->size(); ++i) {
+    if ((*runs)[i].first <= (*runs)[k].second) {
+      (*runs)[k].second = std::max((*runs)[k].second, (*runs)[i].second);
+    } else {
+      (*runs)[++k] = (*runs)[i];
+    }
+  }
+  runs->resize(k + 1);
+}
+
+// The columns of tile row `ty` where plane p is swept (L.active; all of them
+// without it), as merged runs.
+inline void tileRowRuns(const NativeLevel& L, int p, int ty, Runs* runs) {
+  runs->clear();
+  if (!L.active) {
+    runs->emplace_back(0, L.w);
+    return;
+  }
+  const uint8_t* a = L.active + (static_cast<size_t>(p) * L.tiles_y + ty) * L.tiles_x;
+  for (int tx = 0; tx < L.tiles_x; ++tx) {
+    if (!a[tx]) continue;
+    const int x0 = tx * FM_SWEEP_TILE, x1 = std::min(L.w, x0 + FM_SWEEP_TILE);
+    if (!runs->empty() && runs->back().second == x0) {
+      runs->back().second = x1;
+    } else {
+      runs->emplace_back(x0, x1);
+    }
+  }
+}
+
+// Calls f(i, len) for each run of band pixels [i, i + len) (band-relative
+// indices) where plane p is swept: `runs` holds the band's tile rows' runs of
+// that plane.
+template <class F>
+FM_NATIVE_INLINE void forRunPixels(const Runs* runs, int y0, int y1, int w, F f) {
+  const int T = FM_SWEEP_TILE;
+  for (int y = y0; y < y1; ++y) {
+    const size_t row = static_cast<size_t>(y - y0) * w;
+    for (const auto& run : runs[y / T - y0 / T]) f(row + run.first, run.second - run.first);
   }
 }
 
@@ -274,10 +332,12 @@ inline void aggregate(int views, const float* vcost, size_t stride, int len, int
   }
 }
 
-inline void selectBand(const NativeLevel& L, int y0, size_t band_pix, Scratch* s);
+inline void selectBand(const NativeLevel& L, int y0, int y1, size_t band_pix, Scratch* s);
 
 // One band of output rows [y0, y1): the band's cost volume, then the best
-// plane of each of its pixels.
+// plane of each of its pixels. Per plane, only the tiles L.active marks are
+// swept (cost FM_COST_INVALID elsewhere): their columns in each tile row, the
+// warped rows within r of them, widened by r for the windows.
 inline void sweepBand(const NativeLevel& L, int y0, int y1, Scratch* s) {
   const int w = L.w, h = L.h, r = L.r;
   const int rows = y1 - y0;               // output rows
@@ -301,78 +361,120 @@ inline void sweepBand(const NativeLevel& L, int y0, int y1, Scratch* s) {
   float* __restrict agg_sum = s->agg_sum.data();
   int* __restrict agg_n = s->agg_n.data();
   grow(s->volume, band_pix * L.n_planes);
-  Scratch tmp;  // row sums of costRow (small; separate from the warp's rows)
+  Scratch tmp;  // row sums of costRun (small; separate from the warp's rows)
   tmp.p0.resize(w);
   tmp.p1.resize(w);
   tmp.p2.resize(w);
   tmp.p3.resize(w);
+  const int T = FM_SWEEP_TILE;
+  const int ty0 = y0 / T, n_tile_rows = (y1 - 1) / T - ty0 + 1;
+  if (s->tile_runs.size() < static_cast<size_t>(L.n_planes) * n_tile_rows) {
+    s->tile_runs.resize(static_cast<size_t>(L.n_planes) * n_tile_rows);
+  }
+  Runs& row_runs = s->row_runs;
 
   for (int p = 0; p < L.n_planes; ++p) {
     float* vol = s->volume.data() + p * band_pix;
+    Runs* runs = s->tile_runs.data() + static_cast<size_t>(p) * n_tile_rows;
+    bool swept = false;
+    for (int t = 0; t < n_tile_rows; ++t) {
+      tileRowRuns(L, p, ty0 + t, &runs[t]);
+      swept = swept || !runs[t].empty();
+    }
     bool any = false;
-    for (int v = 0; v < L.views; ++v) {
+    for (int v = 0; swept && v < L.views; ++v) {
       bool view_hit = false;
       for (int j = 0; j < wrows; ++j) {
         const int y = y0 - r + j;
-        const size_t o = static_cast<size_t>(j) * w;
-        float *h0 = s->h0.data() + o, *h1 = s->h1.data() + o, *h2 = s->h2.data() + o, *h3 = s->h3.data() + o;
-        bool hit = false;
-        if (y >= 0 && y < h) {
-          const size_t ro = static_cast<size_t>(y) * w;
-          hit = warpRow(L.rx + ro, L.ry + ro, L.rz + ro, w, L.planes[p], L.cams[v], L.poses[v], L.quads[v],
-                        s->warped.data(), s);
+        // The tile rows of the output rows this warped row serves, their
+        // runs widened by the window.
+        const int ta = (std::max(y0, y - r) / T) - ty0, tb = (std::min(y1 - 1, y + r) / T) - ty0;
+        row_runs.clear();
+        for (int t = ta; t <= tb; ++t) {
+          for (const auto& run : runs[t]) row_runs.emplace_back(std::max(0, run.first - r), std::min(w, run.second + r));
         }
-        if (hit) {
-          rowSums(s->warped.data(), L.ref + static_cast<size_t>(y) * w, w, r, s, h0, h1, h2, h3);
-          view_hit = true;
-        } else {
-          for (int x = 0; x < w; ++x) h0[x] = h1[x] = h2[x] = h3[x] = 0.0f;
+        mergeRuns(&row_runs);
+        const size_t o = static_cast<size_t>(j) * w;
+        for (const auto& run : row_runs) {
+          const int a = run.first, len = run.second - run.first;
+          float *h0 = s->h0.data() + o + a, *h1 = s->h1.data() + o + a, *h2 = s->h2.data() + o + a,
+                *h3 = s->h3.data() + o + a;
+          bool hit = false;
+          if (y >= 0 && y < h) {
+            const size_t ro = static_cast<size_t>(y) * w + a;
+            hit = warpRow(L.rx + ro, L.ry + ro, L.rz + ro, len, L.planes[p], L.cams[v], L.poses[v], L.quads[v],
+                          s->warped.data(), s);
+          }
+          if (hit) {
+            rowSums(s->warped.data(), L.ref + static_cast<size_t>(y) * w + a, len, r, s, h0, h1, h2, h3);
+            view_hit = true;
+          } else {
+            for (int x = 0; x < len; ++x) h0[x] = h1[x] = h2[x] = h3[x] = 0.0f;
+          }
         }
       }
       float* vc = s->vcost.data() + (mean_mode ? 0 : v * band_pix);
-      if (!view_hit) {
-        if (!mean_mode) {
-          for (size_t i = 0; i < band_pix; ++i) vc[i] = FM_COST_INVALID;
-        }
-        continue;  // adds nothing to a mean
+      if (!mean_mode) {
+        forRunPixels(runs, y0, y1, w, [&](size_t i, int len) {
+          for (int x = 0; x < len; ++x) vc[i + x] = FM_COST_INVALID;
+        });
       }
+      if (!view_hit) continue;  // adds nothing to a mean
       if (mean_mode && !any) {  // the first view with costs: start the sums
-        for (size_t i = 0; i < band_pix; ++i) {
-          agg_sum[i] = 0.0f;
-          agg_n[i] = 0;
-        }
+        forRunPixels(runs, y0, y1, w, [&](size_t i, int len) {
+          for (int x = 0; x < len; ++x) {
+            agg_sum[i + x] = 0.0f;
+            agg_n[i + x] = 0;
+          }
+        });
       }
       any = true;
       for (int j = 0; j < rows; ++j) {
-        const size_t ro = static_cast<size_t>(y0 + j) * w;
+        const int y = y0 + j;
+        const size_t ro = static_cast<size_t>(y) * w;
+        const bool fresh = j == 0 || y % T == 0;
         float* __restrict c = vc + static_cast<size_t>(j) * w;
-        costRow(*s, w, r, j, L.mean + ro, L.stdev + ro, c, &tmp);
-        if (mean_mode) {  // fm_aggregate's mean, one view at a time
-          float* __restrict sum = agg_sum + static_cast<size_t>(j) * w;
-          int* __restrict n = agg_n + static_cast<size_t>(j) * w;
-          for (int x = 0; x < w; ++x) fm_aggregate_add(c[x], &sum[x], &n[x]);
+        for (const auto& run : runs[y / T - ty0]) {
+          const int a = run.first, len = run.second - run.first;
+          costRun(*s, w, r, j, a, len, fresh, L.mean + ro, L.stdev + ro, c, &tmp);
+          if (mean_mode) {  // fm_aggregate's mean, one view at a time
+            float* __restrict sum = agg_sum + static_cast<size_t>(j) * w;
+            int* __restrict n = agg_n + static_cast<size_t>(j) * w;
+            for (int x = a; x < a + len; ++x) fm_aggregate_add(c[x], &sum[x], &n[x]);
+          }
         }
       }
     }
+    // The plane's costs where it is swept; elsewhere the volume is not read
+    // (selectBand goes by the same runs).
     if (!any) {
-      for (size_t i = 0; i < band_pix; ++i) vol[i] = FM_COST_INVALID;
+      forRunPixels(runs, y0, y1, w, [&](size_t i, int len) {
+        for (int x = 0; x < len; ++x) vol[i + x] = FM_COST_INVALID;
+      });
       continue;
     }
     if (mean_mode) {
-      for (size_t i = 0; i < band_pix; ++i) vol[i] = fm_aggregate_mean(agg_sum[i], agg_n[i]);
+      forRunPixels(runs, y0, y1, w, [&](size_t i, int len) {
+        for (int x = 0; x < len; ++x) vol[i + x] = fm_aggregate_mean(agg_sum[i + x], agg_n[i + x]);
+      });
     } else {
-      aggregate(L.views, s->vcost.data(), band_pix, static_cast<int>(band_pix), L.mode, L.k, vol);
+      forRunPixels(runs, y0, y1, w, [&](size_t i, int len) {
+        aggregate(L.views, s->vcost.data() + i, band_pix, len, L.mode, L.k, vol + i);
+      });
     }
   }
 
-  selectBand(L, y0, band_pix, s);
+  selectBand(L, y0, y1, band_pix, s);
 }
 
 // Winner takes all for the pixels of a band: the steps of fm_select_plane
-// (shared header), run plane by plane over all the band's pixels so that the
-// two passes over the planes vectorize.
-inline void selectBand(const NativeLevel& L, int y0, size_t band_pix, Scratch* s) {
+// (shared header), run plane by plane over the band's pixels where the plane
+// was swept (sweepBand's runs; a plane not swept at a pixel has no cost
+// there) so that the two passes over the planes vectorize.
+inline void selectBand(const NativeLevel& L, int y0, int y1, size_t band_pix, Scratch* s) {
   const size_t first = static_cast<size_t>(y0) * L.w;
+  const int w = L.w, T = FM_SWEEP_TILE;
+  const int n_tile_rows = (y1 - 1) / T - y0 / T + 1;
   const float* __restrict rx = L.rx + first;
   const float* __restrict ry = L.ry + first;
   const float* __restrict rz = L.rz + first;
@@ -388,20 +490,30 @@ inline void selectBand(const NativeLevel& L, int y0, size_t band_pix, Scratch* s
     cb[i] = FM_COST_INVALID;
     best[i] = -1;
   }
+  auto runsOf = [&](int j) { return s->tile_runs.data() + static_cast<size_t>(j) * n_tile_rows; };
   for (int j = 0; j < L.n_planes; ++j) {
     const float* __restrict vj = s->volume.data() + j * band_pix;
-    for (size_t i = 0; i < band_pix; ++i) {
-      const int better = vj[i] < cb[i];
-      cb[i] = better ? vj[i] : cb[i];
-      best[i] = better ? j : best[i];
-    }
+    forRunPixels(runsOf(j), y0, y1, w, [&](size_t i0, int len) {
+      for (size_t i = i0; i < i0 + len; ++i) {
+        const int better = vj[i] < cb[i];
+        cb[i] = better ? vj[i] : cb[i];
+        best[i] = better ? j : best[i];
+      }
+    });
   }
+  // Whether plane j was swept at band pixel i.
+  auto swept = [&](int j, size_t i) {
+    if (!L.active) return true;
+    const int y = y0 + static_cast<int>(i / w), x = static_cast<int>(i % w);
+    return L.active[(static_cast<size_t>(j) * L.tiles_y + y / T) * L.tiles_x + x / T] != 0;
+  };
   int* __restrict prev = s->prev.data();
   int* __restrict next = s->next.data();
   float* __restrict lo = s->lo.data();
   float* __restrict hi = s->hi.data();
   float* __restrict t_best = s->t_best.data();
   float* __restrict second = s->second.data();
+  float* volume = s->volume.data();
   for (size_t i = 0; i < band_pix; ++i) {
     second[i] = FM_COST_INVALID;
     if (best[i] < 0) {
@@ -409,17 +521,25 @@ inline void selectBand(const NativeLevel& L, int y0, size_t band_pix, Scratch* s
       lo[i] = hi[i] = t_best[i] = 0.0f;
       continue;
     }
-    t_best[i] = fm_select_refine(s->volume.data() + i, static_cast<int>(band_pix), L.planes, L.n_planes, best[i], cb[i],
-                                 rx[i], ry[i], rz[i], L.subpixel, &prev[i], &next[i], &lo[i], &hi[i]);
+    // The refinement reads the best plane's neighbours: no cost where they
+    // were not swept.
+    for (const int nb : {best[i] - 1, best[i] + 1}) {
+      if (nb >= 0 && nb < L.n_planes && !swept(nb, i)) volume[nb * band_pix + i] = FM_COST_INVALID;
+    }
+    t_best[i] = fm_select_refine(volume + i, static_cast<int>(band_pix), L.planes, L.n_planes, best[i], cb[i], rx[i],
+                                 ry[i], rz[i], L.subpixel, &prev[i], &next[i], &lo[i], &hi[i]);
   }
   for (int j = 0; j < L.n_planes; ++j) {
     const float* __restrict vj = s->volume.data() + j * band_pix;
     const FmSweepPlane plane = L.planes[j];
-    for (size_t i = 0; i < band_pix; ++i) {
-      const float t = fm_plane_range(plane, rx[i], ry[i], rz[i]);
-      const int take = (vj[i] < second[i] ? 1 : 0) & fm_select_second_candidate(j, best[i], prev[i], next[i], t, lo[i], hi[i]);
-      second[i] = take ? vj[i] : second[i];
-    }
+    forRunPixels(runsOf(j), y0, y1, w, [&](size_t i0, int len) {
+      for (size_t i = i0; i < i0 + len; ++i) {
+        const float t = fm_plane_range(plane, rx[i], ry[i], rz[i]);
+        const int take =
+            (vj[i] < second[i] ? 1 : 0) & fm_select_second_candidate(j, best[i], prev[i], next[i], t, lo[i], hi[i]);
+        second[i] = take ? vj[i] : second[i];
+      }
+    });
   }
   for (size_t i = 0; i < band_pix; ++i) {
     const bool ok = best[i] >= 0 && t_best[i] > 0.0f;

@@ -40,13 +40,27 @@ FrameSetMapper::FrameSetMapper(const Rig& rig, const FrameSetMapperConfig& confi
   config_.validate();
 }
 
-FrameSetResult FrameSetMapper::process(const std::vector<cv::Mat>& images, const Eigen::Isometry3d& T_W_B,
-                                       const std::optional<ImageBoxes>& boxes) {
+FrameSetResult FrameSetMapper::depthOf(const std::vector<cv::Mat>& images) {
   const auto t0 = Clock::now();
   FrameSetResult r;
   r.depth = depth_.compute(images);
   r.ms.depth_ms = msSince(t0);
-  r = maskAndFuse(std::move(r), images[depth_.reference()], T_W_B, boxes);
+  if (r.depth.calibration_ms > 0 && depth_.selfCalibration()) {
+    r.calibration = depth_.selfCalibration()->state();
+    r.calibrated_rig = depth_.selfCalibration()->rig();
+  }
+  return r;
+}
+
+FrameSetResult FrameSetMapper::process(const std::vector<cv::Mat>& images, const Eigen::Isometry3d& T_W_B,
+                                       const std::optional<ImageBoxes>& boxes) {
+  flush();
+  const auto t0 = Clock::now();
+  FrameSetResult r = depthOf(images);
+  double detect_ms = 0;
+  const ImageBoxes use = boxesFor(images[depth_.reference()], boxes, &detect_ms);
+  r = maskAndFuse(std::move(r), use, T_W_B, depth_.rig().cameras[depth_.reference()]);
+  r.ms.detect_ms = detect_ms;
   r.ms.total_ms = msSince(t0);
   return r;
 }
@@ -54,42 +68,97 @@ FrameSetResult FrameSetMapper::process(const std::vector<cv::Mat>& images, const
 FrameSetResult FrameSetMapper::processDepth(cv::Mat depth, const Eigen::Isometry3d& T_W_B,
                                             const std::optional<ImageBoxes>& boxes) {
   if (detector_) throw std::invalid_argument("a given depth map has no image for the detector; give boxes instead");
+  flush();
   const auto t0 = Clock::now();
   FrameSetResult r;
   r.depth.depth = std::move(depth);
   r.ms.depth_ms = msSince(t0);
-  r = maskAndFuse(std::move(r), cv::Mat(), T_W_B, boxes);
+  double detect_ms = 0;
+  r = maskAndFuse(std::move(r), boxesFor(cv::Mat(), boxes, &detect_ms), T_W_B,
+                  depth_.rig().cameras[depth_.reference()]);
   r.ms.total_ms = msSince(t0);
   return r;
 }
 
-FrameSetResult FrameSetMapper::maskAndFuse(FrameSetResult r, const cv::Mat& reference_image,
-                                           const Eigen::Isometry3d& T_W_B, const std::optional<ImageBoxes>& boxes) {
+std::optional<FrameSetResult> FrameSetMapper::submit(const std::vector<cv::Mat>& images,
+                                                     const Eigen::Isometry3d& T_W_B,
+                                                     const std::optional<ImageBoxes>& boxes) {
+  const auto t0 = Clock::now();
+  if (images.size() <= static_cast<size_t>(depth_.reference())) {
+    depthOf(images);  // the depth stage names what is wrong; nothing is started
+    throw std::invalid_argument("a frame set without the reference camera's image");
+  }
+  // This set's detection, once the previous one is done (one detector, one
+  // call at a time): on a copy of the reference image, which the caller may
+  // reuse.
+  if (detection_.valid()) detection_.wait();
+  const cv::Mat reference = images[depth_.reference()].clone();
+  auto timed_boxes = std::make_shared<double>(0.0);
+  detection_ = std::async(std::launch::async, [this, reference, boxes, timed_boxes] {
+                 return boxesFor(reference, boxes, timed_boxes.get());
+               }).share();
+  FrameSetResult r;
+  try {
+    r = depthOf(images);
+  } catch (...) {
+    detection_.wait();  // the detection of a frame set that is dropped
+    throw;
+  }
+  // The previous set's fusion must end before this one's starts (one map).
+  std::optional<FrameSetResult> previous = flush();
+  std::shared_future<ImageBoxes> detection = detection_;
+  // The reference camera as now (the self-calibration of the next set may
+  // change the rig while this one fuses).
+  const RigCamera ref = depth_.rig().cameras[depth_.reference()];
+  pending_ = std::async(std::launch::async, [this, r = std::move(r), detection, timed_boxes, T_W_B, t0, ref]() mutable {
+    const ImageBoxes use = detection.get();
+    FrameSetResult out = maskAndFuse(std::move(r), use, T_W_B, ref);
+    out.ms.detect_ms = *timed_boxes;
+    out.ms.total_ms = msSince(t0);
+    return out;
+  });
+  return previous;
+}
+
+std::optional<FrameSetResult> FrameSetMapper::flush() {
+  if (!pending_.valid()) return std::nullopt;
+  return pending_.get();  // rethrows the frame set's detection or fusion error
+}
+
+ImageBoxes FrameSetMapper::boxesFor(const cv::Mat& reference_image, const std::optional<ImageBoxes>& given,
+                                    double* ms) {
   const auto td = Clock::now();
   ImageBoxes found;
-  const ImageBoxes* use = boxes ? &*boxes : nullptr;
   if (detector_) {
     found.boxes = detector_->detect(reference_image, config_.detection.only_moving);
     found.image_width = reference_image.cols;
     found.image_height = reference_image.rows;
-    use = &found;
+  } else if (given) {
+    found = *given;
   }
-  r.ms.detect_ms = msSince(td);
+  *ms = msSince(td);
+  return found;
+}
+
+FrameSetResult FrameSetMapper::maskAndFuse(FrameSetResult r, const ImageBoxes& use, const Eigen::Isometry3d& T_W_B,
+                                           const RigCamera& ref) {
   const auto tm = Clock::now();
   cv::Mat& depth = r.depth.depth;
-  const int bw = use && use->image_width > 0 ? use->image_width : depth.cols;
-  const int bh = use && use->image_height > 0 ? use->image_height : depth.rows;
-  r.mask = maskDepthBoxes(depth, use ? use->boxes : std::vector<Detection>{}, float(config_.mask.margin_px), bw, bh);
+  const int bw = use.image_width > 0 ? use.image_width : depth.cols;
+  const int bh = use.image_height > 0 ? use.image_height : depth.rows;
+  r.mask = maskDepthBoxes(depth, use.boxes, float(config_.mask.margin_px), bw, bh);
   r.masked_pixels = size_t(cv::countNonZero(r.mask));
   r.ms.mask_ms = msSince(tm);
   const auto tf = Clock::now();
-  const RigCamera& ref = depth_.rig().cameras[depth_.reference()];
   r.fusion = map_->integrate(depth, ref.model, T_W_B * ref.T_base_cam, T_W_B.translation());
   if (++frame_sets_ % size_t(config_.mesh_every) == 0) mesher_.update(*map_);
   r.ms.fuse_ms = msSince(tf);
   return r;
 }
 
-void FrameSetMapper::finish() { mesher_.update(*map_); }
+void FrameSetMapper::finish() {
+  if (pending_.valid()) pending_.wait();  // its result stays for flush()
+  mesher_.update(*map_);
+}
 
 }  // namespace fisheye_mapping

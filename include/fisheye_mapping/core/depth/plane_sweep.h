@@ -121,6 +121,27 @@ struct PlaneSweepConfig {
   SweepResolution resolution = SweepResolution::Multiscale;
   double crop_width = 572.0 / 1024.0;   // centre crop, fractions of the full image
   double crop_height = 332.0 / 544.0;
+  // Multiscale coarse-to-fine: in each tile of FM_SWEEP_TILE^2 pixels the
+  // full-resolution crop sweeps only the planes within crop_search_planes
+  // planes (of each family) of the half-resolution winners under and around
+  // the tile (all planes where the half resolution has none); 0 sweeps every
+  // plane there.
+  int crop_search_planes = 2;
+  // Half and multiscale, coarse-to-fine: a quarter-resolution sweep of every
+  // other plane of each family first (window_quarter), then the
+  // half-resolution sweep searches, in
+  // each tile, only the planes within half_search_planes planes of the
+  // quarter-resolution winners under and around it; 0: no quarter-resolution
+  // sweep, the half resolution sweeps every plane.
+  int half_search_planes = 2;
+  int window_quarter = 5;
+  // Not a parameter: skip the work whose result the filters would drop (tiles
+  // with no pixel that can keep a depth: masked, outside the camera's domain,
+  // or too little texture with the texture filter on; ground planes in tiles
+  // none of whose rays meet them) and the coarse-to-fine search above. false
+  // sweeps every plane at every pixel (tests compare the two: the filtered
+  // depth is the same with crop_search_planes 0).
+  bool skip_work = true;
   // Supporting views: kept when the parallax between the near and far planes
   // (median over the reference's pixels, full resolution, in pixels of the
   // coarser of the two images: a narrow camera's long focal length does not
@@ -175,6 +196,9 @@ struct DepthResult {
   std::vector<std::string> used_views;     // supporting views matched
   std::vector<std::string> dropped_views;  // "<name>: reason"
   std::vector<std::string> warnings;       // "<name>: ..." (e.g. non-finite pixels of float images, masked)
+  // Share of the (plane, pixel) pairs of the swept scales that were swept
+  // (PlaneSweepConfig::skip_work skips the rest); 1 when nothing was skipped.
+  double swept_share = 1.0;
   double sweep_ms = 0.0;   // all scales, including transfers
   double filter_ms = 0.0;
   double total_ms = 0.0;
@@ -219,7 +243,7 @@ std::vector<int> selectSupportViews(const PlaneSweepConfig& config, const Camera
 
 // What a backend gets for one scale.
 struct SweepLevel {
-  int id = 0;                       // scale slot (0 full, 1 half, 2 crop)
+  int id = 0;                       // scale slot (0 full, 1 half, 2 crop, 3 quarter)
   unsigned rays_version = 0;        // changes whenever `rays` changes
   const std::vector<float>* rays = nullptr;  // 3 per pixel; zero = masked / invalid
   int width = 0, height = 0;
@@ -228,6 +252,12 @@ struct SweepLevel {
   std::vector<FmCameraT<float>> cameras;  // supporting views
   std::vector<FmViewPose> poses;          // T_view_ref
   std::vector<cv::Mat> images;            // CV_32FC1, -1 where self-masked
+  // Which planes are swept where: active[(p * tiles_y + ty) * tiles_x + tx]
+  // non-zero sweeps plane p over the tile of FM_SWEEP_TILE^2 pixels at
+  // (tx, ty); a pixel of a tile where p is not swept has p's cost
+  // FM_COST_INVALID (every backend alike). Empty: every plane everywhere.
+  std::vector<uint8_t> active;
+  int tiles_x = 0, tiles_y = 0;
 };
 
 class SweepBackend {
@@ -279,7 +309,7 @@ class PlaneSweep {
     cv::Mat valid;  // CV_8UC1, 255 where `rays` has a ray (not masked, in the image)
     unsigned version = 0;
   };
-  RayCache rays_[3];
+  RayCache rays_[4];
 };
 
 // The rig's cameras as sweep views relative to camera `ref_index`.

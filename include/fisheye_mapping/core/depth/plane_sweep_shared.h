@@ -29,6 +29,9 @@ FM_FN float fm_maxf(float x, float lo) { return x > lo ? x : lo; }
 FM_FN float fm_clampf(float x, float lo, float hi) { return x >= lo ? (x <= hi ? x : hi) : lo; }
 
 #define FM_SWEEP_MAX_VIEWS 8
+/* Side of the square tiles of a level's plane activity (SweepLevel::active):
+ * a plane is swept, or not, for whole tiles of FM_SWEEP_TILE^2 pixels. */
+#define FM_SWEEP_TILE 8
 #define FM_COST_INVALID 2.0f
 #define FM_FAMILY_FRONTO 0 /* parallel to the reference image plane; d = z-depth */
 #define FM_FAMILY_GROUND 1 /* parallel to the ground */

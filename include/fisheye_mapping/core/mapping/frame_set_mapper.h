@@ -8,6 +8,8 @@
 #ifndef FISHEYE_MAPPING_CORE_MAPPING_FRAME_SET_MAPPER_H_
 #define FISHEYE_MAPPING_CORE_MAPPING_FRAME_SET_MAPPER_H_
 
+#include <atomic>
+#include <future>
 #include <memory>
 #include <optional>
 #include <vector>
@@ -61,6 +63,11 @@ struct FrameSetResult {
   size_t masked_pixels = 0;
   IntegrationStats fusion;
   FrameSetTimings ms;
+  // When the depth stage's self-calibration updated in this frame set
+  // (depth.calibration_ms > 0): its state and the rig right after the update
+  // (submit() hands results back a frame set late, when it may have moved on).
+  std::vector<CameraCalibrationState> calibration;
+  std::optional<Rig> calibrated_rig;
 };
 
 class FrameSetMapper {
@@ -78,7 +85,20 @@ class FrameSetMapper {
   // sweep (e.g. ground-truth depth: the evaluation's reference map).
   FrameSetResult processDepth(cv::Mat depth, const Eigen::Isometry3d& T_W_B,
                               const std::optional<ImageBoxes>& boxes = std::nullopt);
-  // Brings the mesh up to date with the map (after the last frame set).
+  // Pipelined: the same stages as process(), with the depth of this frame set
+  // computed on the calling thread while this set's detection and the
+  // previous set's masking and fusion run on other threads, so that a frame
+  // set costs about its depth time. Returns the previous frame set's result
+  // (none for the first), flush() the last one; results come in order, each
+  // the same as process() would have given. An exception of a frame set's
+  // depth is thrown by its submit(), one of its detection or fusion by the
+  // next submit() or flush() (that frame set is lost, the map keeps the
+  // others). process() and processDepth() flush first. Not thread-safe.
+  std::optional<FrameSetResult> submit(const std::vector<cv::Mat>& images, const Eigen::Isometry3d& T_W_B,
+                                       const std::optional<ImageBoxes>& boxes = std::nullopt);
+  std::optional<FrameSetResult> flush();
+  // Brings the mesh up to date with the map (after the last frame set;
+  // flushes a submitted one first).
   void finish();
 
   const Rig& rig() const { return depth_.rig(); }
@@ -88,17 +108,25 @@ class FrameSetMapper {
   bool hasDetector() const { return detector_ != nullptr; }
   TsdfMap& map() { return *map_; }
   TsdfMesher& mesher() { return mesher_; }
-  size_t frameSets() const { return frame_sets_; }
+  size_t frameSets() const { return frame_sets_.load(); }
 
  private:
-  FrameSetResult maskAndFuse(FrameSetResult r, const cv::Mat& reference_image, const Eigen::Isometry3d& T_W_B,
-                             const std::optional<ImageBoxes>& boxes);
+  // The boxes to mask: the detector's on the reference image, else `given`
+  // (none: nothing masked).
+  ImageBoxes boxesFor(const cv::Mat& reference_image, const std::optional<ImageBoxes>& given, double* ms);
+  FrameSetResult maskAndFuse(FrameSetResult r, const ImageBoxes& boxes, const Eigen::Isometry3d& T_W_B,
+                             const RigCamera& reference);
+  // The depth stage's result for the images, with the calibration snapshot.
+  FrameSetResult depthOf(const std::vector<cv::Mat>& images);
   FrameSetMapperConfig config_;
   DepthStage depth_;
   std::unique_ptr<Detector> detector_;
   std::unique_ptr<TsdfMap> map_;
   TsdfMesher mesher_;
-  size_t frame_sets_ = 0;
+  std::atomic<size_t> frame_sets_{0};
+  // submit(): the previous frame set's detection and masking + fusion.
+  std::shared_future<ImageBoxes> detection_;
+  std::future<FrameSetResult> pending_;
 };
 
 }  // namespace fisheye_mapping
