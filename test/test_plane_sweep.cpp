@@ -603,14 +603,15 @@ TEST_P(PlaneSweepStreet, SkippedWorkLeavesTheFilteredDepthAsItWas) {
 
 // Coarse-to-fine: the half resolution sweeping only the planes near the
 // quarter-resolution winners and the full-resolution crop only those near
-// the half-resolution winners (two each side, the defaults) is as accurate
+// the half-resolution winners (one each side, the defaults) is as accurate
 // against the rendered truth as sweeping every plane, and covers as much,
 // with less work.
 TEST_P(PlaneSweepStreet, CoarseToFineCropIsAsAccurateAsTheFullSearch) {
   fm::PlaneSweepConfig full = config(fm::parseSweepBackend(GetParam()));
   full.crop_search_planes = full.half_search_planes = 0;
-  fm::PlaneSweepConfig c2f = full;
-  c2f.crop_search_planes = c2f.half_search_planes = 2;
+  const fm::PlaneSweepConfig c2f = config(fm::parseSweepBackend(GetParam()));  // the defaults
+  ASSERT_EQ(c2f.crop_search_planes, 1);
+  ASSERT_EQ(c2f.half_search_planes, 1);
   const fm::DepthResult a = run(full), b = run(c2f);
   const fm::DepthErrorStats ea = fm::depthError(a.depth, truth_, mask_, 15.0, full.far);
   const fm::DepthErrorStats eb = fm::depthError(b.depth, truth_, mask_, 15.0, full.far);

@@ -126,14 +126,14 @@ struct PlaneSweepConfig {
   // planes (of each family) of the half-resolution winners under and around
   // the tile (all planes where the half resolution has none); 0 sweeps every
   // plane there.
-  int crop_search_planes = 2;
+  int crop_search_planes = 1;
   // Half and multiscale, coarse-to-fine: a quarter-resolution sweep of every
   // other plane of each family first (window_quarter), then the
   // half-resolution sweep searches, in
   // each tile, only the planes within half_search_planes planes of the
   // quarter-resolution winners under and around it; 0: no quarter-resolution
   // sweep, the half resolution sweeps every plane.
-  int half_search_planes = 2;
+  int half_search_planes = 1;
   int window_quarter = 5;
   // Not a parameter: skip the work whose result the filters would drop (tiles
   // with no pixel that can keep a depth: masked, outside the camera's domain,
