@@ -386,9 +386,8 @@ DepthResult PlaneSweep::compute(const SweepView& ref, const std::vector<SweepVie
     // plane of each family (and each family's last): its winners place the
     // half's search to within a plane of the half's spacing either way.
     std::vector<FmSweepPlane> quarter_planes;
-    for (size_t j = 0; j < planes.size(); ++j) {
-      int index = 0;  // index within the family
-      while (index < static_cast<int>(j) && planes[j - index - 1].family == planes[j].family) ++index;
+    for (size_t j = 0, index = 0; j < planes.size(); ++j) {  // index: within the family
+      index = (j > 0 && planes[j - 1].family == planes[j].family) ? index + 1 : 0;
       const bool last = j + 1 == planes.size() || planes[j + 1].family != planes[j].family;
       if (index % 2 == 0 || last) quarter_planes.push_back(planes[j]);
     }
