@@ -15,9 +15,11 @@
 #include <ros/ros.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/image_encodings.h>
+#include <tf2_ros/static_transform_broadcaster.h>
 
 #include <cmath>
 #include <cstdlib>
+#include <limits>
 #include <set>
 #include <functional>
 #include <map>
@@ -25,6 +27,7 @@
 #include <string>
 
 #include "fisheye_mapping/Detection2DArray.h"
+#include "fisheye_mapping/TrackedVehicleArray.h"
 #include "ros_test_utils.h"
 
 namespace {
@@ -430,6 +433,138 @@ TEST(DynamicObjects, DiagnosticsReconfigureAndCameraInfo) {
   EXPECT_TRUE(classes(detectAt(ros::Time(1700000312, 0))).count("dog")) << "only_moving off: every class";
   reconfigure("/detector", boolParam("only_moving", true));
   EXPECT_FALSE(classes(detectAt(ros::Time(1700000313, 0))).count("dog"));
+}
+
+// Issue 31: only what moves is masked. A static camera (tf map -> cam_street,
+// latched) sees a parked car and a car driving across at 10 m/s, 10 m ahead,
+// at 5 Hz; after the decision time the parked car's depth stays and the moving
+// one's goes, depth_masked/vehicles says which is which, and the diagnostics
+// say what is tracked. Without the transform every vehicle is masked and the
+// diagnostics name the missing transform.
+TEST(DynamicObjects, OnlyMovingVehiclesAreMasked) {
+  ros::NodeHandle nh;
+  tf2_ros::StaticTransformBroadcaster tf_pub;
+  geometry_msgs::TransformStamped T;
+  T.header.stamp = ros::Time(1700000000, 0);
+  T.header.frame_id = "map";
+  T.child_frame_id = "cam_street";
+  T.transform.rotation.w = 1.0;
+  tf_pub.sendTransform(T);
+  const int W = 640, H = 360;
+  const double f = 320;
+  sensor_msgs::CameraInfo info;
+  info.width = W;
+  info.height = H;
+  info.distortion_model = "plumb_bob";
+  info.D = {0, 0, 0, 0, 0};
+  info.K = {f, 0, W / 2.0, 0, f, H / 2.0, 0, 0, 1};
+  info.P = {f, 0, W / 2.0, 0, 0, f, H / 2.0, 0, 0, 0, 1, 0};
+  info.R = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+  ros::Publisher info_pub = nh.advertise<sensor_msgs::CameraInfo>("depth/camera_info", 5, true);
+  ros::Publisher depth_pub = nh.advertise<sensor_msgs::Image>("depth/image", 5);
+  ros::Publisher det_pub = nh.advertise<fisheye_mapping::Detection2DArray>("detections", 5);
+  std::mutex mu;
+  std::map<uint64_t, sensor_msgs::ImageConstPtr> masked;
+  std::map<uint64_t, fisheye_mapping::TrackedVehicleArrayConstPtr> vehicles;
+  auto s1 = nh.subscribe<sensor_msgs::Image>("depth_masked/image", 20, [&](const sensor_msgs::ImageConstPtr& m) {
+    std::lock_guard<std::mutex> l(mu);
+    masked[m->header.stamp.toNSec()] = m;
+  });
+  auto s2 = nh.subscribe<fisheye_mapping::TrackedVehicleArray>(
+      "depth_masked/vehicles", 20, [&](const fisheye_mapping::TrackedVehicleArrayConstPtr& m) {
+        std::lock_guard<std::mutex> l(mu);
+        vehicles[m->header.stamp.toNSec()] = m;
+      });
+  Diagnostics diag(nh);
+  ros::AsyncSpinner spinner(1);
+  spinner.start();
+  ASSERT_TRUE(waitFor([&] { return depth_pub.getNumSubscribers() > 0 && det_pub.getNumSubscribers() > 0; }, 20.0));
+  info_pub.publish(info);
+  ros::WallDuration(1.0).sleep();
+  // Two car fronts 10 m ahead (the plane z = 10 inside their boxes, nothing
+  // elsewhere): the parked one 5 m left, the moving one crossing from the
+  // right at 10 m/s.
+  auto frame = [&](int k, const std::string& frame_id) {
+    const ros::Time t = ros::Time(1700000400, 0) + ros::Duration(0.2 * k);
+    cv::Mat depth(H, W, CV_32FC1, cv::Scalar(std::numeric_limits<float>::quiet_NaN()));
+    fisheye_mapping::Detection2DArray dets;
+    dets.header.stamp = t;
+    dets.header.frame_id = frame_id;
+    dets.image_width = W;
+    dets.image_height = H;
+    for (const double x : {-5.0, 6.0 - 10.0 * 0.2 * k}) {  // lateral position, camera x (right)
+      fisheye_mapping::Detection2D d;
+      d.class_name = "car";
+      d.score = 0.9f;
+      d.x_min = float(W / 2.0 + f * (x - 1.0) / 10.0), d.x_max = float(W / 2.0 + f * (x + 1.0) / 10.0);
+      d.y_min = float(H / 2.0 - f * 0.5 / 10.0), d.y_max = float(H / 2.0 + f * 1.0 / 10.0);
+      for (int v = int(d.y_min); v < int(d.y_max); ++v) {
+        for (int u = int(d.x_min); u < int(d.x_max); ++u) {
+          const double rx = (u + 0.5 - W / 2.0) / f, ry = (v + 0.5 - H / 2.0) / f;
+          depth.at<float>(v, u) = float(10.0 * std::sqrt(rx * rx + ry * ry + 1.0));  // range to z = 10
+        }
+      }
+      dets.detections.push_back(d);
+    }
+    det_pub.publish(dets);
+    std_msgs::Header h;
+    h.stamp = t;
+    h.frame_id = frame_id;
+    depth_pub.publish(cv_bridge::CvImage(h, "32FC1", depth).toImageMsg());
+    EXPECT_TRUE(waitFor([&] {
+      std::lock_guard<std::mutex> l(mu);
+      return masked.count(t.toNSec()) && vehicles.count(t.toNSec());
+    }, 5.0)) << "frame " << k;
+    return t;
+  };
+  auto centreOf = [&](const ros::Time& t, int i) {
+    std::lock_guard<std::mutex> l(mu);
+    const auto& d = vehicles[t.toNSec()]->vehicles[i].detection;
+    const int u = int((d.x_min + d.x_max) / 2), v = int((d.y_min + d.y_max) / 2);
+    const float r = cv_bridge::toCvShare(masked[t.toNSec()])->image.at<float>(v, u);
+    const double rx = (u + 0.5 - W / 2.0) / f, ry = (v + 0.5 - H / 2.0) / f;
+    return r / float(std::sqrt(rx * rx + ry * ry + 1.0));  // z-depth: 10 where kept
+  };
+  ros::Time last;
+  for (int k = 0; k < 5; ++k) last = frame(k, "cam_street");
+  {
+    std::lock_guard<std::mutex> l(mu);
+    const auto first = vehicles[ros::Time(1700000400, 0).toNSec()];
+    ASSERT_EQ(first->vehicles.size(), 2u);
+    EXPECT_EQ(first->world_frame, "map");
+    for (const auto& v : first->vehicles) {
+      EXPECT_EQ(v.motion, fisheye_mapping::TrackedVehicle::UNDECIDED) << "a vehicle first seen is undecided";
+      EXPECT_TRUE(v.masked);
+    }
+    const auto& now = *vehicles[last.toNSec()];
+    ASSERT_EQ(now.vehicles.size(), 2u);
+    EXPECT_EQ(now.vehicles[0].motion, fisheye_mapping::TrackedVehicle::PARKED);
+    EXPECT_FALSE(now.vehicles[0].masked);
+    EXPECT_NEAR(now.vehicles[0].position.x, -5.0, 0.2) << "map = camera frame: x right";
+    EXPECT_NEAR(now.vehicles[0].position.z, 10.0, 0.01);
+    EXPECT_EQ(now.vehicles[1].motion, fisheye_mapping::TrackedVehicle::MOVING);
+    EXPECT_TRUE(now.vehicles[1].masked);
+    EXPECT_NEAR(now.vehicles[1].speed, 10.0, 0.5);
+  }
+  EXPECT_NEAR(centreOf(last, 0), 10.0f, 1e-4) << "the parked car's depth stays";
+  EXPECT_TRUE(std::isnan(centreOf(last, 1))) << "the moving car's depth goes";
+  Diagnostics::Status st;
+  EXPECT_TRUE(diag.waitFor("depth_mask: masking", [](const Diagnostics::Status& s) {
+    return s.values.count("vehicle motion") && s.values.at("vehicle motion") == "tracking in map";
+  }, &st, 10.0)) << st.values["vehicle motion"];
+  // No transform to the depth's frame: every vehicle undecided and masked, named.
+  const ros::Time lost = frame(5, "cam_nowhere");
+  EXPECT_TRUE(std::isnan(centreOf(lost, 0))) << "without a pose the parked car is masked too";
+  {
+    std::lock_guard<std::mutex> l(mu);
+    for (const auto& v : vehicles[lost.toNSec()]->vehicles) {
+      EXPECT_EQ(v.motion, fisheye_mapping::TrackedVehicle::UNDECIDED);
+      EXPECT_TRUE(v.masked);
+    }
+  }
+  EXPECT_TRUE(diag.waitFor("depth_mask: masking", [](const Diagnostics::Status& s) {
+    return s.values.count("vehicle motion") && s.values.at("vehicle motion").rfind("no tf map -> cam_nowhere", 0) == 0;
+  }, &st, 10.0)) << st.values["vehicle motion"];
 }
 
 int main(int argc, char** argv) {

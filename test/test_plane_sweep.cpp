@@ -174,6 +174,63 @@ TEST(PlaneSweepPlanes, GroundPlanesContainPointsAtTheirHeight) {
   for (int j = 2; j < config.fronto_planes; ++j) EXPECT_NEAR(1 / planes[j].d - 1 / planes[j - 1].d, step, 1e-6);
 }
 
+// Wall planes: each contains the base points at its lateral offset, left
+// (y = +o) and right (y = -o), offsets uniform in inverse offset from
+// wall_min to wall_max; the two sides are separate families (no sub-plane
+// refinement across them), refined in inverse offset.
+TEST(PlaneSweepPlanes, WallPlanesContainPointsAtTheirLateralOffset) {
+  fm::PlaneSweepConfig config;
+  config.wall_planes = 8;
+  config.wall_min = 2.0;
+  config.wall_max = 16.0;
+  const fm::Rig rig = fm::loadKalibrRig(kData + "/small_rig_camchain.yaml", kData + "/small_rig_mount.yaml");
+  const Eigen::Isometry3d T_base_ref = rig.cameras[1].T_base_cam;
+  ASSERT_LT(std::abs(T_base_ref.translation().y()), config.wall_min);
+  const auto planes = fm::makeSweepPlanes(config, &T_base_ref);
+  const size_t first = static_cast<size_t>(config.fronto_planes + config.ground_planes);
+  ASSERT_EQ(planes.size(), first + 2 * config.wall_planes);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> U(-20, 20);
+  for (int side = 0; side < 2; ++side) {
+    for (int i = 0; i < config.wall_planes; ++i) {
+      const auto& p = planes[first + side * config.wall_planes + i];
+      EXPECT_EQ(p.family, side == 0 ? FM_FAMILY_WALL_LEFT : FM_FAMILY_WALL_RIGHT);
+      EXPECT_GT(p.d, 0.0f);
+      const double inv = 1.0 / 2.0 + (1.0 / 16.0 - 1.0 / 2.0) * i / 7.0;
+      const double o = (side == 0 ? 1.0 : -1.0) / inv;
+      for (int k = 0; k < 5; ++k) {
+        const Eigen::Vector3d X_ref = T_base_ref.inverse() * Eigen::Vector3d(U(rng), o, U(rng));
+        EXPECT_NEAR(p.nx * X_ref.x() + p.ny * X_ref.y() + p.nz * X_ref.z(), p.d, 1e-4) << side << " " << i;
+      }
+      // The camera itself lies on the near side (n . 0 = 0 < d).
+    }
+  }
+  // Sub-plane refinement of a left wall plane: the parabola's vertex in
+  // inverse offset, and never towards the right family's first plane.
+  const int j = static_cast<int>(first) + 3;
+  std::vector<float> volume(planes.size(), 0.9f);
+  volume[j - 1] = 0.3f;
+  volume[j] = 0.1f;
+  volume[j + 1] = 0.2f;
+  const Eigen::Vector3d ray = (T_base_ref.inverse().linear() * Eigen::Vector3d(0.3, 1.0, -0.1)).normalized();
+  float range, cost, ratio;
+  ASSERT_TRUE(fm::fm_select_plane(volume.data(), 1, planes.data(), static_cast<int>(planes.size()), ray.x(), ray.y(),
+                                  ray.z(), 1, &range, &cost, &ratio));
+  const double off = 0.5 * (0.3 - 0.2) / (0.3 - 2 * 0.1 + 0.2);  // towards plane j + 1
+  const double d = 1.0 / (1.0 / planes[j].d + off * (1.0 / planes[j + 1].d - 1.0 / planes[j].d));
+  const double n_dot_r = planes[j].nx * ray.x() + planes[j].ny * ray.y() + planes[j].nz * ray.z();
+  EXPECT_NEAR(range, d / n_dot_r, 1e-3);
+  const int last_left = static_cast<int>(first) + config.wall_planes - 1;
+  std::fill(volume.begin(), volume.end(), 0.9f);
+  volume[last_left] = 0.1f;
+  volume[last_left + 1] = 0.15f;  // the right family's first plane: not a neighbour
+  volume[last_left - 1] = 0.5f;
+  ASSERT_TRUE(fm::fm_select_plane(volume.data(), 1, planes.data(), static_cast<int>(planes.size()), ray.x(), ray.y(),
+                                  ray.z(), 1, &range, &cost, &ratio));
+  const double n_last = planes[last_left].nx * ray.x() + planes[last_left].ny * ray.y() + planes[last_left].nz * ray.z();
+  EXPECT_LE(range, planes[last_left].d / n_last + 1e-3) << "refined towards the other side's plane";
+}
+
 // A base frame 0.3 m above the road (a rear axle) with ground_height -0.3
 // sweeps the same ground planes, relative to the camera, as the base frame on
 // the road with ground_height 0: each plane contains the base points at height

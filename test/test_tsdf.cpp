@@ -223,6 +223,44 @@ TEST(TsdfMap, WallIntegrationFollowsTheRule) {
   EXPECT_GE(checked, 8);
 }
 
+// A parked car that drove off (issue 31): a box fused as a car, then the wall
+// behind it seen where it stood. Without a carve region the car stays in the
+// map (no ray ends near it any more); with its region the space in front of
+// the wall is carved free and only the wall is left.
+TEST(TsdfMap, CarveRegionsLeaveNoGhost) {
+  const CameraModel cam = CameraModel::pinhole(test::makeIntrinsics(100, 100, 63.5, 47.5, 128, 96));
+  const Eigen::Isometry3d T_W_C = lookAt(Eigen::Vector3d(0, 0, 1.0), Eigen::Vector3d(5, 0, 1.0));
+  Scene parked, gone;
+  parked.ground = gone.ground = false;
+  const analytic::Box wall{Eigen::Vector3d(10, -20, -20), Eigen::Vector3d(11, 20, 20)};
+  parked.boxes = {wall, {Eigen::Vector3d(5, -1, 0), Eigen::Vector3d(9.5, 1, 1.5)}};
+  gone.boxes = {wall};
+  const cv::Mat with_car = parked.render(cam, T_W_C), without = gone.render(cam, T_W_C);
+  auto nearCar = [&](TsdfMap& map) {
+    TsdfMesher mesher(map.config().min_observations);
+    mesher.rebuild(map);  // every block (update() takes only those changed since the last one)
+    int n = 0;
+    for (const auto& p : mesher.surfaceCloud().points) n += p.x < 9.7;  // the wall is at x = 10
+    return n;
+  };
+  const Eigen::AlignedBox3d region(Eigen::Vector3d(4, -3, -1), Eigen::Vector3d(10, 3, 3));
+  for (const bool carve : {false, true}) {
+    TsdfMap map{TsdfConfig()};
+    for (int i = 0; i < 8; ++i) map.integrate(with_car, cam, T_W_C, Eigen::Vector3d(0, 0, 0));
+    const int before = nearCar(map);
+    EXPECT_GT(before, 200) << "the parked car is in the map";
+    std::vector<Eigen::AlignedBox3d> regions;
+    if (carve) regions.push_back(region);
+    for (int i = 0; i < 12; ++i) map.integrate(without, cam, T_W_C, Eigen::Vector3d(0, 0, 0), regions);
+    const int after = nearCar(map);
+    if (carve) {
+      EXPECT_EQ(after, 0) << "the car's voxels in front of the wall are carved free";
+    } else {
+      EXPECT_GT(after, before / 2) << "without carving the ghost stays";
+    }
+  }
+}
+
 // Drive past walls along x: ground and two facades at y = +-6 m.
 Scene street() {
   Scene s;

@@ -32,6 +32,7 @@ fm_add_test(test_plane_sweep_node ROSTEST test/launch/plane_sweep_depth.test
 # --- detection and masking -------------------------------------------------
 fm_add_test(test_detector SOURCES test/test_detector.cpp)
 fm_add_test(test_depth_mask SOURCES test/test_depth_mask.cpp)
+fm_add_test(test_vehicle_motion SOURCES test/test_vehicle_motion.cpp)
 fm_add_test(test_dynamic_objects_node ROSTEST test/launch/dynamic_objects.test
   SOURCES test/test_dynamic_objects_node.cpp DEPENDS fisheye_mapping_nodelets)
 

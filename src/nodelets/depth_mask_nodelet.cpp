@@ -8,14 +8,31 @@
 //             detections (fisheye_mapping/Detection2DArray of the same camera)
 //             while someone listens to an image output (lazy).
 // Publishes   through image_transport, all with the depth map's header:
-//             depth_masked/image  (32FC1: NaN inside every box grown by ~margin_px)
+//             depth_masked/image  (32FC1: NaN inside the boxes of the moving
+//                          and undecided vehicles, grown by ~margin_px; of
+//                          every box with ~mask_parked)
 //             depth_masked/mask   (mono8: 255 where a box removed depth)
 //             depth_masked/colour (bgr8: colour-coded masked depth, black
-//                          invalid; only while subscribed; ~colour_range [near, far])
+//                          invalid, each box drawn with its decision: red
+//                          moving, green parked, yellow undecided; only
+//                          while subscribed; ~colour_range [near, far])
+//             depth_masked/vehicles (fisheye_mapping/TrackedVehicleArray:
+//                          each detection's decision, masked or not, track,
+//                          speed, position in ~world_frame, and the regions
+//                          of parked vehicles that drove off, which the TSDF
+//                          fusion carves free; for every depth map that came
+//                          with detections)
 //             depth_masked/camera_info: the latest depth/camera_info with the
 //                          masked depth's header (none until one has arrived;
 //                          masking never waits for it; said once in the log
 //                          and in the diagnostics).
+// Vehicles   each detected vehicle is placed in ~world_frame (default map)
+//             by the depth in its box, with depth/camera_info's camera and tf
+//             from ~world_frame to the depth's frame at its stamp, and
+//             tracked: moving, parked or undecided (core VehicleMotionTracker;
+//             ~moving_speed, ~decide_after, ...). Without a camera_info or the
+//             transform every vehicle is undecided, so masked (diagnostics
+//             "vehicle motion" names what is missing; a tf failure is counted).
 // Pairing     by exact stamp. A depth map waits up to ~wait_for_detections
 //             seconds (wall time) for its detections; then it passes through
 //             unmasked and is counted as a drop by reason (warning).
@@ -52,10 +69,16 @@
 #include <ros/ros.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
+#include <tf2_ros/buffer.h>
+#include <tf2_ros/transform_listener.h>
+
+#include <opencv2/imgproc.hpp>
 
 #include "fisheye_mapping/DepthMaskReconfigureConfig.h"
 
 #include "fisheye_mapping/Detection2DArray.h"
+#include "fisheye_mapping/TrackedVehicleArray.h"
+#include "fisheye_mapping/ros/camera_info.h"
 #include "fisheye_mapping/core/depth/depth_image.h"
 #include "fisheye_mapping/core/detection/depth_mask.h"
 #include "fisheye_mapping/core/common/stream_timeline.h"
@@ -80,7 +103,9 @@ class DepthMaskNodelet : public nodelet::Nodelet {
     try {
       requireKnownParams(pnh, {DepthMaskConfig::params().names(), DepthMaskNodeOptions::params().names()});
       cfg_ = DepthMaskConfig::fromParams(RosParams(pnh));
-      transport_ = DepthMaskNodeOptions::params().read(RosParams(pnh), DepthMaskNodeOptions()).image_transport;
+      const DepthMaskNodeOptions options = DepthMaskNodeOptions::params().read(RosParams(pnh), DepthMaskNodeOptions());
+      transport_ = options.image_transport;
+      world_frame_ = options.world_frame;
       monitor_ = std::make_unique<StageMonitor>(nh, pnh, "masking");
     } catch (const std::exception& e) {
       NODELET_FATAL("depth mask not started: %s", e.what());
@@ -88,6 +113,10 @@ class DepthMaskNodelet : public nodelet::Nodelet {
     }
     monitor_->setInputExpected(false);
     pairer_ = std::make_unique<Pairer>(cfg_.wait_for_detections, std::size_t(cfg_.max_pending));
+    tracker_ = std::make_unique<VehicleMotionTracker>(cfg_.motion);
+    tf_buffer_ = std::make_unique<tf2_ros::Buffer>(ros::Duration(30.0));
+    tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_, nh);
+    vehicles_pub_ = nh.advertise<TrackedVehicleArray>("depth_masked/vehicles", 5);
     timeline_ = std::make_unique<StreamTimeline>(2, cfg_.time_reset_threshold);
     monitor_->setExtraReport([this](diagnostic_updater::DiagnosticStatusWrapper& stat) { report(stat); });
     // image_transport's convention: the CameraInfo next to the (resolved, remapped) image topic.
@@ -188,6 +217,7 @@ class DepthMaskNodelet : public nodelet::Nodelet {
 
   // Called with mutex_ held.
   void resetTime(const StreamTimeline::Event& ev, const char* what) {
+    tracker_->reset();
     const std::size_t dropped = pairer_->pendingDepth();
     for (std::size_t i = 0; i < dropped; ++i) monitor_->dropped("time reset (waiting depth maps)");
     pairer_ = std::make_unique<Pairer>(cfg_.wait_for_detections, std::size_t(cfg_.max_pending));
@@ -267,6 +297,10 @@ class DepthMaskNodelet : public nodelet::Nodelet {
       stat.addf("margin (px)", "%g", cfg_.margin_px);
       stat.addf("wait for detections (s)", "%g", cfg_.wait_for_detections);
       stat.add("max pending", cfg_.max_pending);
+      stat.add("vehicle motion", motion_state_);
+      stat.add("vehicles moving / parked / undecided",
+               std::to_string(n_moving_) + " / " + std::to_string(n_parked_) + " / " + std::to_string(n_undecided_));
+      stat.add("parked vehicles masked", cfg_.mask_parked ? "yes (mask_parked)" : "no");
     }
     stat.add("camera_info", cameraInfoState());
   }
@@ -323,17 +357,147 @@ class DepthMaskNodelet : public nodelet::Nodelet {
                             p.depth->header.stamp.toSec(), p.queue_full ? "(queue full)" : "within the wait",
                             (unsigned long)unmasked_);
     }
-    const cv::Mat mask = maskDepthBoxes(depth, boxes, float(cfg_.margin_px), w, h);
+    // Which vehicles move, from the depth before masking.
+    const std::vector<VehicleMotionTracker::Decision> decisions = decide(p.depth->header, depth, boxes, w, h);
+    std::vector<Detection> masked;
+    for (size_t i = 0; i < boxes.size(); ++i) {
+      if (cfg_.mask_parked || decisions[i].motion != VehicleMotion::Parked) masked.push_back(boxes[i]);
+    }
+    const cv::Mat mask = maskDepthBoxes(depth, masked, float(cfg_.margin_px), w, h);
     masked_pub_.publish(toDepthMsg(p.depth->header, depth));
     mask_pub_.publish(toImageMsg(p.depth->header, mask));  // mono8
-    if (colour_pub_.getNumSubscribers() > 0)
-      colour_pub_.publish(toImageMsg(p.depth->header, colorizeDepth(depth, cfg_.colour_near, cfg_.colour_far)));
+    if (p.dets) publishVehicles(p.depth->header, **p.dets, decisions, w, h);
+    if (colour_pub_.getNumSubscribers() > 0) {
+      cv::Mat colour = colorizeDepth(depth, cfg_.colour_near, cfg_.colour_far);
+      drawDecisions(&colour, boxes, decisions, w, h);
+      colour_pub_.publish(toImageMsg(p.depth->header, colour));
+    }
     publishCameraInfo(*p.depth);
     monitor_->processed(StageStats::now() - t0);
     monitor_->output();
   }
 
+  // Each box's decision (called with mutex_ held): all undecided without a
+  // camera (depth/camera_info of the depth's size) or the world pose, named
+  // in motion_state_.
+  std::vector<VehicleMotionTracker::Decision> decide(const std_msgs::Header& header, const cv::Mat& depth,
+                                                     const std::vector<Detection>& boxes, int w, int h) {
+    std::vector<VehicleMotionTracker::Decision> none(boxes.size());
+    if (boxes.empty()) return none;
+    std::optional<CameraModel> camera;
+    {
+      std::lock_guard<std::mutex> lock(info_mutex_);
+      if (!info_) {
+        motion_state_ = "no camera_info on " + info_in_topic_ + ": every vehicle masked";
+      } else if (int(info_->width) != depth.cols || int(info_->height) != depth.rows) {
+        motion_state_ = "camera_info " + std::to_string(info_->width) + "x" + std::to_string(info_->height) +
+                        " does not fit the depth: every vehicle masked";
+      } else {
+        if (info_ != camera_info_used_) {
+          try {
+            camera_ = fromCameraInfo(*info_);
+          } catch (const std::exception& e) {
+            camera_.reset();
+            motion_state_ = std::string("camera_info refused: ") + e.what() + ": every vehicle masked";
+          }
+          camera_info_used_ = info_;
+        }
+        camera = camera_;
+      }
+    }
+    std::optional<Eigen::Isometry3d> T_W_C;
+    if (camera) {
+      try {
+        T_W_C = toIsometry(tf_buffer_->lookupTransform(world_frame_, header.frame_id, header.stamp));
+      } catch (const std::exception& e) {
+        monitor_->tfFailure(world_frame_ + " -> " + header.frame_id);
+        motion_state_ = "no tf " + world_frame_ + " -> " + header.frame_id + " at " +
+                        formatStamp(std::int64_t(header.stamp.toNSec())) + " s: every vehicle masked (" + e.what() +
+                        ")";
+      }
+    }
+    std::vector<VehicleMotionTracker::Decision> out = none;
+    if (camera) {
+      try {
+        out = tracker_->update(boxes, w, h, depth, *camera, T_W_C, header.stamp.toSec());
+        if (T_W_C) motion_state_ = "tracking in " + world_frame_;
+      } catch (const std::exception& e) {
+        out = none;
+        motion_state_ = std::string("not tracked: ") + e.what() + ": every vehicle masked";
+      }
+    }
+    for (const auto& d : out) {
+      n_moving_ += d.motion == VehicleMotion::Moving;
+      n_parked_ += d.motion == VehicleMotion::Parked;
+      n_undecided_ += d.motion == VehicleMotion::Undecided;
+    }
+    return out;
+  }
+
+  // depth_masked/vehicles: each detection of the message with its decision
+  // (the decisions follow the message's order: fromDetectionArrayMsg keeps it).
+  void publishVehicles(const std_msgs::Header& header, const Detection2DArray& dets,
+                       const std::vector<VehicleMotionTracker::Decision>& decisions, int w, int h) {
+    TrackedVehicleArray out;
+    out.header = header;
+    out.world_frame = world_frame_;
+    out.image_width = uint32_t(w);
+    out.image_height = uint32_t(h);
+    for (size_t i = 0; i < dets.detections.size() && i < decisions.size(); ++i) {
+      TrackedVehicle v;
+      v.detection = dets.detections[i];
+      const auto& d = decisions[i];
+      v.motion = d.motion == VehicleMotion::Moving   ? TrackedVehicle::MOVING
+                 : d.motion == VehicleMotion::Parked ? TrackedVehicle::PARKED
+                                                     : TrackedVehicle::UNDECIDED;
+      v.masked = cfg_.mask_parked || d.motion != VehicleMotion::Parked;
+      v.track_id = d.track;
+      v.speed = float(d.speed);
+      v.position.x = d.position.x();
+      v.position.y = d.position.y();
+      v.position.z = d.position.z();
+      out.vehicles.push_back(v);
+    }
+    for (const Eigen::AlignedBox3d& g : tracker_->ghostRegions()) {
+      geometry_msgs::Point lo, hi;
+      lo.x = g.min().x(), lo.y = g.min().y(), lo.z = g.min().z();
+      hi.x = g.max().x(), hi.y = g.max().y(), hi.z = g.max().z();
+      out.carve_min.push_back(lo);
+      out.carve_max.push_back(hi);
+    }
+    vehicles_pub_.publish(out);
+  }
+
+  // The boxes on the colour-coded depth: red moving, green parked, yellow undecided.
+  static void drawDecisions(cv::Mat* colour, const std::vector<Detection>& boxes,
+                            const std::vector<VehicleMotionTracker::Decision>& decisions, int w, int h) {
+    const double sx = double(colour->cols) / w, sy = double(colour->rows) / h;
+    for (size_t i = 0; i < boxes.size() && i < decisions.size(); ++i) {
+      const Detection& b = boxes[i];
+      if (!std::isfinite(b.x_min) || !std::isfinite(b.y_min) || !std::isfinite(b.x_max) || !std::isfinite(b.y_max))
+        continue;
+      const VehicleMotion m = decisions[i].motion;
+      const cv::Scalar c = m == VehicleMotion::Moving   ? cv::Scalar(0, 0, 255)
+                           : m == VehicleMotion::Parked ? cv::Scalar(0, 200, 0)
+                                                        : cv::Scalar(0, 220, 255);
+      const cv::Point p0(int(b.x_min * sx), int(b.y_min * sy)), p1(int(b.x_max * sx), int(b.y_max * sy));
+      cv::rectangle(*colour, p0, p1, c, 2);
+      std::string label = toString(m);
+      if (std::isfinite(decisions[i].speed)) label += cv::format(" %.1f m/s", decisions[i].speed);
+      cv::putText(*colour, label, cv::Point(p0.x, std::max(12, p0.y - 4)), cv::FONT_HERSHEY_SIMPLEX, 0.45, c, 1);
+    }
+  }
+
   DepthMaskConfig cfg_;  // the running parameters
+  std::string world_frame_ = "map";
+  std::unique_ptr<VehicleMotionTracker> tracker_;
+  std::unique_ptr<tf2_ros::Buffer> tf_buffer_;
+  std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
+  ros::Publisher vehicles_pub_;
+  std::optional<CameraModel> camera_;
+  sensor_msgs::CameraInfoConstPtr camera_info_used_;
+  std::string motion_state_ = "no vehicle yet";
+  std::uint64_t n_moving_ = 0, n_parked_ = 0, n_undecided_ = 0;
   std::string transport_, info_in_topic_;
   std::unique_ptr<Pairer> pairer_;
   std::unique_ptr<StreamTimeline> timeline_;

@@ -35,7 +35,7 @@
 //             (dict camera -> mask image path, non-zero = car body),
 //             plane-sweep parameters (see config/plane_sweep_depth.yaml);
 //             filter thresholds and near / far / ground_height / ground_min /
-//             ground_max / min_parallax_* / min_overlap also through
+//             ground_max / wall_min / wall_max / min_parallax_* / min_overlap also through
 //             dynamic_reconfigure (cfg/PlaneSweepFilters.cfg; the latter
 //             rebuild the sweep), ~time_reset_threshold (s, default 1; 0: never),
 //             ~self_calibration* (the online rotation self-calibration, on by
@@ -315,9 +315,10 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
     if ((level & kSweepLevel) && reconfigured_) {
       if (stage_) stage_->setSweepConfig(*next);
       config_.sweep = *next;  // also for a stage built later (~rig_source camera_info)
-      NODELET_INFO("sweep rebuilt: near %.2f, far %.1f m, ground %.2f + [%.2f, %.2f] m, min parallax %.3f px",
-                   next->near, next->far, next->ground_height, next->ground_min, next->ground_max,
-                   next->min_parallax_px);
+      NODELET_INFO("sweep rebuilt: near %.2f, far %.1f m, ground %.2f + [%.2f, %.2f] m, walls [%.1f, %.1f] m, "
+                   "min parallax %.3f px",
+                   next->near, next->far, next->ground_height, next->ground_min, next->ground_max, next->wall_min,
+                   next->wall_max, next->min_parallax_px);
     } else {
       if (stage_) stage_->setFilters(next->filters);
       config_.sweep.filters = next->filters;

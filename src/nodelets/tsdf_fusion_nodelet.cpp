@@ -7,6 +7,9 @@
 //             camera model of each depth image (the latest CameraInfo of its
 //             frame_id; a frame before one is dropped, "no camera_info yet").
 //             ~rig_source camchain (default): the model from ~camchain/~mount.
+//             depth_masked/vehicles (TrackedVehicleArray, optional): the
+//             regions of parked vehicles that drove off (carve_min/max), carved
+//             free in the depth maps fused within 2 s after it (no ghost).
 // Publishes   tsdf/mesh  (visualization_msgs/MarkerArray: one TRIANGLE_LIST per map
 //                    block, only blocks changed since the last publish)
 //             tsdf/cloud (sensor_msgs/PointCloud2: surface points, world frame)
@@ -46,6 +49,7 @@
 #include <tf2_ros/transform_listener.h>
 #include <visualization_msgs/MarkerArray.h>
 
+#include "fisheye_mapping/TrackedVehicleArray.h"
 #include "fisheye_mapping/FilePath.h"
 #include "fisheye_mapping/FrameDone.h"
 #include "fisheye_mapping/TsdfFusionConfig.h"
@@ -141,6 +145,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     if (rig_source_ == "camera_info") {
       info_sub_ = nh.subscribe("depth_masked/camera_info", 10, &TsdfFusionNodelet::onCameraInfo, this);
     }
+    vehicles_sub_ = nh.subscribe("depth_masked/vehicles", 5, &TsdfFusionNodelet::onVehicles, this);
     depth_sub_.subscribe(nh, "depth_masked/image", queue_size);
     depth_sub_.registerCallback([this](const sensor_msgs::ImageConstPtr&) { monitor_->input(); });
     tf_filter_ = std::make_unique<tf2_ros::MessageFilter<sensor_msgs::Image>>(depth_sub_, *tf_buffer_, world_frame_,
@@ -433,7 +438,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     std::lock_guard<std::mutex> lock(mutex_);
     try {
       const double t0 = StageStats::now();
-      const auto stats = map_->integrate(depth, *model, T_W_C, T_W_B.translation());
+      const auto stats = map_->integrate(depth, *model, T_W_C, T_W_B.translation(), carveFor(msg->header.stamp));
       monitor_->processed(StageStats::now() - t0);
       monitor_->output();  // the stage's product: a frame in the map
       last_stamp_ = msg->header.stamp;
@@ -596,6 +601,34 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     return true;
   }
 
+  // The depth mask's regions to carve (parked vehicles that drove off), in
+  // the map's frame; another frame is refused once, named in the log.
+  void onVehicles(const TrackedVehicleArrayConstPtr& msg) {
+    std::lock_guard<std::mutex> lock(carve_mutex_);
+    if (msg->world_frame != world_frame_) {
+      NODELET_WARN_ONCE("depth_masked/vehicles is in frame '%s', the map in '%s': its carve regions are ignored",
+                        msg->world_frame.c_str(), world_frame_.c_str());
+      return;
+    }
+    carve_.clear();
+    for (size_t i = 0; i < msg->carve_min.size() && i < msg->carve_max.size(); ++i) {
+      const auto& a = msg->carve_min[i];
+      const auto& b = msg->carve_max[i];
+      carve_.emplace_back(Eigen::Vector3d(a.x, a.y, a.z), Eigen::Vector3d(b.x, b.y, b.z));
+    }
+    carve_stamp_ = msg->header.stamp;
+  }
+  // The latest regions, for a depth map within 2 s of them.
+  std::vector<Eigen::AlignedBox3d> carveFor(const ros::Time& stamp) {
+    std::lock_guard<std::mutex> lock(carve_mutex_);
+    if (carve_.empty() || std::abs((stamp - carve_stamp_).toSec()) > 2.0) return {};
+    return carve_;
+  }
+
+  std::mutex carve_mutex_;
+  std::vector<Eigen::AlignedBox3d> carve_;
+  ros::Time carve_stamp_;
+  ros::Subscriber vehicles_sub_;
   std::mutex mutex_;
   std::string rig_source_ = "camchain";
   Rig rig_;  // camchain source

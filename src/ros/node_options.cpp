@@ -103,6 +103,8 @@ const ParamTable<DepthMaskNodeOptions>& DepthMaskNodeOptions::params() {
     ParamTable<C> t("depth_mask node");
     t.text("image_transport", [](C& c) -> std::string& { return c.image_transport; },
            "image_transport of the depth images")
+        .text("world_frame", [](C& c) -> std::string& { return c.world_frame; },
+              "Fixed frame the vehicles are tracked in (tf from it to the depth's frame)")
         .include(DiagnosticOptions::params(), [](C& c) -> DiagnosticOptions& { return c.diagnostics; });
     return t;
   }();

@@ -3,6 +3,7 @@
 //   depth_eval synthetic --camchain F --mount F --out DIR [--preset urban|forest]
 //              [--seed N] [--frames N] [--start S] [--step S] [--backend auto|native|opencl|cpu]
 //              [--device D] [--max-range M] [--realistic] [--sweep-camchain F] [--every-plane]
+//              [--wall-planes N]
 //     Renders the rig on a synthetic drive (the same world as make_drive) and
 //     compares depth with the exact rendered range of the reference camera
 //     (cam0): full / half / multi-scale without filters (paper Fig. 3), each
@@ -60,6 +61,7 @@ const char* kUsage =
     "usage: depth_eval synthetic --camchain F --mount F --out DIR [--preset urban|forest] [--seed N]\n"
     "                  [--frames N] [--start S] [--step S] [--backend auto|native|opencl|cpu] [--device D]\n"
     "                  [--max-range M] [--realistic] [--sweep-camchain F] [--every-plane]\n"
+    "                  [--wall-planes N]\n"
     "       depth_eval vcharge --data DIR --camera left|right --out DIR [--device D] [--ground-z Z]\n"
     "                  [--label TEXT]\n"
     "       depth_eval vcharge-check --data DIR --camera left|right --depth-k F --depth-k1 F --out DIR\n"
@@ -75,6 +77,7 @@ const char* kUsage =
     "    --sweep-camchain F  the sweep uses this camchain instead (e.g. refine_rig's output)\n"
     "    --every-plane     sweep every plane at every pixel (no skipped work, no coarse-to-fine\n"
     "                      search): the reference for what the stage's less work costs\n"
+    "    --wall-planes N   wall planes on each side (plane_sweep wall_planes; default the sweep's)\n"
     "  vcharge: motion stereo on the V-Charge sequence in --data, checked without ground truth\n"
     "    --ground-z Z      nominal ground height in the system frame   --label TEXT  CSV code column\n"
     "  vcharge-check: the same checks on saved depth TIFFs of frames K (--k, default 2) and K+1\n"
@@ -90,7 +93,7 @@ const char* kUsage =
 const std::map<std::string, std::set<std::string>> kModeOptions = {
     {"synthetic",
      {"camchain", "mount", "out", "preset", "seed", "frames", "start", "step", "backend", "device", "max-range",
-      "realistic", "sweep-camchain", "every-plane"}},
+      "realistic", "sweep-camchain", "every-plane", "wall-planes"}},
     {"vcharge", {"data", "camera", "out", "device", "ground-z", "label"}},
     {"vcharge-check", {"data", "camera", "depth-k", "depth-k1", "out", "k", "ground-z", "label"}},
 };
@@ -192,6 +195,8 @@ int runSynthetic(const std::map<std::string, std::string>& a) {
   fm::PlaneSweepConfig base;
   base.backend = fm::parseSweepBackend(get(a, "backend", "auto"));
   base.skip_work = !a.count("every-plane");
+  base.wall_planes = int(fm::cli::parseInt("--wall-planes", get(a, "wall-planes", std::to_string(base.wall_planes)), 0,
+                                           1000));
   base.device = get(a, "device", "-");
   if (base.device == "-") base.device.clear();
   fm::DepthFilterConfig none;

@@ -11,7 +11,9 @@
 //
 // Writes DIR/mesh.ply, DIR/cloud.pcd, DIR/cloud_all.pcd (every voxel with a
 // surface, i.e. without the minimum-observation filter), DIR/timings.md (ms
-// per stage) and DIR/timings.csv (one row per frame set), each under a
+// per stage), DIR/timings.csv (one row per frame set) and, with a detector,
+// DIR/vehicles.csv (each detected vehicle: moving, parked or undecided, its
+// speed and track, and whether the drive's true boxes say it moves), each under a
 // temporary name renamed over the old file once complete, and prints the files
 // it wrote. Exit status: 0; 1 when the run failed or a map file could not be
 // written (e.g. --frames 1: nothing observed often enough for a mesh; the
@@ -32,6 +34,7 @@
 #include <cstdio>
 #include <fstream>
 #include <functional>
+#include <iomanip>
 #include <iostream>
 #include <map>
 #include <memory>
@@ -74,7 +77,8 @@ const char* kUsage =
     "  --bag B            the drive: camera images (raw or compressed), /tf, and for the\n"
     "                     oracles /<ref>/detections_gt and /<ref>/depth_gt\n"
     "  --camchain F, --mount F  the rig (Kalibr camchain and mount)\n"
-    "  --out DIR          mesh.ply, cloud.pcd, cloud_all.pcd, timings.md, timings.csv\n"
+    "  --out DIR          mesh.ply, cloud.pcd, cloud_all.pcd, timings.md, timings.csv,\n"
+    "                     vehicles.csv (with a detector: each vehicle's motion decision)\n"
     "  --config YAML      sections sync, plane_sweep, detector, depth_mask, tsdf over the\n"
     "                     stage defaults (as vehicle.launch's config:=)\n"
     "  --detector D       nanodet (default, as vehicle.launch), finetuned (the cache's\n"
@@ -353,6 +357,10 @@ int main(int argc, char** argv) {
     std::ofstream csv(csv_tmp);
     if (!csv) throw std::runtime_error("cannot write " + csv_tmp);
     csv << "stamp,sweep_ms,detect_ms,mask_ms,fuse_ms,total_ms,valid_pixels,masked_pixels\n";
+    // Each detected vehicle's motion decision, with the truth where the bag
+    // has the moving vehicles' true boxes (IoU >= 0.3 with one: moving).
+    std::ostringstream vehicles_csv;
+    vehicles_csv << "stamp,x_min,y_min,x_max,y_max,score,motion,speed_mps,track,x,y,true_moving\n";
     std::ostringstream calib_csv;
     calib_csv << "stamp,camera,rotvec_ref_cam_x_deg,rotvec_ref_cam_y_deg,rotvec_ref_cam_z_deg,correction_deg,"
                  "residual_deg,inliers,level,status\n";
@@ -363,6 +371,36 @@ int main(int argc, char** argv) {
     // One frame set's result: the self-calibration's state, the depth TIFF,
     // the timings and the progress line.
     auto handle = [&](fm::FrameSetResult r, const ros::Time& stamp) {
+      if (!r.motion.empty()) {
+        auto gt = gt_boxes.find(stamp.toNSec());
+        std::vector<fm::Detection> truth;
+        double gsx = 1.0, gsy = 1.0;
+        if (gt != gt_boxes.end()) {
+          fm::StampedDetections d = fm::fromDetectionArrayMsg(*gt->second);
+          truth = std::move(d.detections);
+          if (d.image_width > 0 && d.image_height > 0) {
+            gsx = double(r.boxes.image_width) / d.image_width;
+            gsy = double(r.boxes.image_height) / d.image_height;
+          }
+        }
+        for (size_t i = 0; i < r.motion.size(); ++i) {
+          const fm::Detection& b = r.boxes.boxes[i];
+          int moving = gt == gt_boxes.end() ? -1 : 0;
+          for (const fm::Detection& g : truth) {
+            const double ix = std::max(0.0, std::min<double>(b.x_max, g.x_max * gsx) - std::max<double>(b.x_min, g.x_min * gsx));
+            const double iy = std::max(0.0, std::min<double>(b.y_max, g.y_max * gsy) - std::max<double>(b.y_min, g.y_min * gsy));
+            const double inter = ix * iy;
+            const double uni = double(b.x_max - b.x_min) * (b.y_max - b.y_min) +
+                               (g.x_max - g.x_min) * gsx * (g.y_max - g.y_min) * gsy - inter;
+            if (uni > 0 && inter / uni >= 0.3) moving = 1;
+          }
+          const auto& m = r.motion[i];
+          vehicles_csv << std::fixed << std::setprecision(3) << stamp.toSec() << "," << b.x_min << "," << b.y_min
+                       << "," << b.x_max << "," << b.y_max << "," << b.score << "," << fm::toString(m.motion) << ","
+                       << m.speed << "," << m.track << "," << m.position.x() << "," << m.position.y() << ","
+                       << moving << "\n";
+        }
+      }
       if (r.depth.calibration_ms > 0) {
         // The self-calibration's state after this update: each supporting
         // camera's rotation relative to the reference, as used from now on.
@@ -436,7 +474,7 @@ int main(int argc, char** argv) {
           std::vector<cv::Mat> images;
           for (size_t c = 0; c < set.size(); ++c) images.push_back(set[c].sweepImage(rig.cameras[c].name));
           in_flight.push_back(stamp);
-          std::optional<fm::FrameSetResult> previous = mapper.submit(images, T_W_B, boxes);
+          std::optional<fm::FrameSetResult> previous = mapper.submit(images, T_W_B, boxes, stamp.toSec());
           if (previous) {
             handle(std::move(*previous), in_flight.front());
             in_flight.pop_front();
@@ -535,6 +573,10 @@ int main(int argc, char** argv) {
     written.push_back("timings.csv");
     cli::writeTextAtomically(out + "/timings.md", [&](std::ostream& f) { f << md.str(); });
     written.push_back("timings.md");
+    if (detecting) {
+      cli::writeTextAtomically(out + "/vehicles.csv", [&](std::ostream& f) { f << vehicles_csv.str(); });
+      written.push_back("vehicles.csv");
+    }
     std::cout << md.str();
     std::cout << "wrote " << out << "/";
     for (size_t k = 0; k < written.size(); ++k) std::cout << (k ? ", " : "") << written[k];

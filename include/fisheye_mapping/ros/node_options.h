@@ -75,6 +75,7 @@ struct DetectorNodeOptions {
 // time_reset_threshold).
 struct DepthMaskNodeOptions {
   std::string image_transport = "raw";
+  std::string world_frame = "map";  // vehicles are tracked in it (tf world_frame -> depth frame)
   DiagnosticOptions diagnostics;
   static const ParamTable<DepthMaskNodeOptions>& params();
 };

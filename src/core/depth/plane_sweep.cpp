@@ -155,47 +155,89 @@ struct CoarsePrior {
   int planes_each_side = 2;
 };
 
+// The runs of consecutive planes of one family in a plane list, with what
+// placing a point among them takes: every plane of a family has the same
+// normal (fronto: the optical axis, d = z-depth) and monotonic offsets d,
+// spaced in d (ground) or in 1 / d (fronto, walls), by which a point's
+// fractional index is interpolated between the planes either side of it.
+struct PlaneFamilyRun {
+  int first = 0, count = 0, family = FM_FAMILY_FRONTO;
+  bool inverse = true;
+  std::vector<double> keys;  // d or 1 / d of each plane, made increasing (sign)
+  double sign = 1.0;
+  double key(double d) const { return sign * (inverse ? 1.0 / d : d); }
+  // The fractional index of offset d along the family (may lie outside
+  // [0, count - 1]: extrapolated with the end planes' spacing).
+  double index(double d) const {
+    if (count < 2) return 0.0;
+    const double k = key(d);
+    double fi;
+    if (k <= keys.front()) {
+      fi = (k - keys[0]) / (keys[1] - keys[0]);
+    } else if (k >= keys.back()) {
+      fi = (count - 1) + (k - keys[count - 1]) / (keys[count - 1] - keys[count - 2]);
+    } else {
+      const int i = static_cast<int>(std::upper_bound(keys.begin(), keys.end(), k) - keys.begin()) - 1;
+      fi = i + (k - keys[i]) / (keys[i + 1] - keys[i]);
+    }
+    return std::isfinite(fi) ? std::clamp(fi, -1e6, 1e6) : 0.0;
+  }
+};
+
+std::vector<PlaneFamilyRun> planeFamilies(const std::vector<FmSweepPlane>& planes) {
+  std::vector<PlaneFamilyRun> runs;
+  for (int j = 0; j < static_cast<int>(planes.size()); ++j) {
+    if (runs.empty() || planes[j].family != runs.back().family) {
+      PlaneFamilyRun r;
+      r.first = j;
+      r.family = planes[j].family;
+      r.inverse = r.family != FM_FAMILY_GROUND;
+      runs.push_back(r);
+    }
+    ++runs.back().count;
+  }
+  for (auto& r : runs) {
+    const double k0 = r.key(planes[r.first].d), k1 = r.key(planes[r.first + r.count - 1].d);
+    r.sign = k1 < k0 ? -1.0 : 1.0;
+    for (int j = r.first; j < r.first + r.count; ++j) r.keys.push_back(r.key(planes[j].d));
+  }
+  return runs;
+}
+
 // SweepLevel::active for a level of w x h pixels with rays `rays` (3 per
 // pixel, zero where none) and the pixels that can keep a depth (`live`): a
-// plane is swept in a tile when the tile has a live pixel, for ground planes
-// a live pixel whose ray meets the plane (every ground plane has the same
-// normal and a positive offset, so they meet the same rays), and, with a
-// prior, the plane lies within prior->planes_each_side planes of its family
-// of a coarser scale's winner under the tile or beside it (every plane when
-// there is none).
+// plane is swept in a tile when the tile has a live pixel, for ground and
+// wall planes a live pixel whose ray meets the plane (every plane of such a
+// family has the same normal and a positive offset, so they meet the same
+// rays), and, with a prior, the plane lies within prior->planes_each_side
+// planes of its family of a coarser scale's winner under the tile or beside
+// it (every plane when there is none).
 std::vector<uint8_t> planeActivity(const PlaneSweepConfig& config, const cv::Mat& live, const std::vector<float>& rays,
                                    const std::vector<FmSweepPlane>& planes, const CoarsePrior* prior, int* tiles_x,
                                    int* tiles_y) {
+  (void)config;
   const int w = live.cols, h = live.rows, T = FM_SWEEP_TILE;
   const int tx_n = (w + T - 1) / T, ty_n = (h + T - 1) / T;
   *tiles_x = tx_n;
   *tiles_y = ty_n;
   const size_t tiles = static_cast<size_t>(tx_n) * ty_n;
   const int n = static_cast<int>(planes.size());
-  int n_fronto = 0, first_ground = -1;
-  for (int j = 0; j < n; ++j) {
-    if (planes[j].family == FM_FAMILY_FRONTO) ++n_fronto;
-    if (planes[j].family == FM_FAMILY_GROUND && first_ground < 0) first_ground = j;
-  }
-  const int n_ground = first_ground < 0 ? 0 : n - first_ground;
-  // Plane spacing of each family: fronto uniform in inverse depth, ground in
-  // offset (makeSweepPlanes).
-  const double inv_near = 1.0 / config.near, inv_far = 1.0 / config.far;
-  const double ground_step =
-      config.ground_planes > 1 ? (config.ground_max - config.ground_min) / (config.ground_planes - 1) : 1.0;
+  const std::vector<PlaneFamilyRun> families = planeFamilies(planes);
+  const int n_fam = static_cast<int>(families.size());
   std::vector<uint8_t> active(tiles * n, 0);
-  std::vector<uint8_t> wanted(n);
+  std::vector<uint8_t> wanted(n), hit(n_fam);
   for (int ty = 0; ty < ty_n; ++ty) {
     for (int tx = 0; tx < tx_n; ++tx) {
-      bool any_live = false, ground_hit = false;
+      bool any_live = false;
+      for (int f = 0; f < n_fam; ++f) hit[f] = families[f].family == FM_FAMILY_FRONTO ? 1 : 0;
       for (int y = ty * T; y < std::min(h, (ty + 1) * T); ++y) {
         const uint8_t* l = live.ptr<uint8_t>(y);
         for (int x = tx * T; x < std::min(w, (tx + 1) * T); ++x) {
           if (!l[x]) continue;
           any_live = true;
-          if (first_ground >= 0 && !ground_hit) {
-            const float* r = &rays[3 * (static_cast<size_t>(y) * w + x)];
-            ground_hit = fm_plane_inverse_range(planes[first_ground], r[0], r[1], r[2]) > 0.0f;
+          const float* r = &rays[3 * (static_cast<size_t>(y) * w + x)];
+          for (int f = 0; f < n_fam; ++f) {
+            if (!hit[f]) hit[f] = fm_plane_inverse_range(planes[families[f].first], r[0], r[1], r[2]) > 0.0f;
           }
         }
       }
@@ -217,28 +259,26 @@ std::vector<uint8_t> planeActivity(const PlaneSweepConfig& config, const cv::Mat
             any_winner = true;
             const float* r = &(*prior->rays)[3 * (static_cast<size_t>(y) * hr.cols + x)];
             const double px = t * r[0], py = t * r[1], pz = t * r[2];
-            if (pz > 0.0 && n_fronto > 1) {  // fronto: index of inverse depth 1 / z
-              const double fi = std::clamp((inv_near - 1.0 / pz) / (inv_near - inv_far) * (n_fronto - 1), -1e6, 1e6);
+            // In each family, the planes either side of the winner's point
+            // (its offset n . P along the family's normal) and K more.
+            for (const PlaneFamilyRun& fam : families) {
+              if (fam.count < 2) continue;
+              const FmSweepPlane& p0 = planes[fam.first];
+              const double g = p0.nx * px + p0.ny * py + p0.nz * pz;
+              if (fam.inverse && !(g > 0.0)) continue;  // behind the camera / beyond the wall's side
+              const double fi = fam.index(g);
               const int lo = std::max(0, static_cast<int>(std::floor(fi)) - K);
-              const int hi = std::min(n_fronto - 1, static_cast<int>(std::ceil(fi)) + K);
-              for (int j = lo; j <= hi; ++j) wanted[j] = 1;
-            }
-            if (n_ground > 0) {  // ground: offset n . P against d_i = d_0 - step * i
-              const FmSweepPlane& g0 = planes[first_ground];
-              const double g = g0.nx * px + g0.ny * py + g0.nz * pz;
-              const double gi = std::clamp((g0.d - g) / ground_step, -1e6, 1e6);
-              const int lo = std::max(0, static_cast<int>(std::floor(gi)) - K);
-              const int hi = std::min(n_ground - 1, static_cast<int>(std::ceil(gi)) + K);
-              for (int j = lo; j <= hi; ++j) wanted[first_ground + j] = 1;
+              const int hi = std::min(fam.count - 1, static_cast<int>(std::ceil(fi)) + K);
+              for (int j = lo; j <= hi; ++j) wanted[fam.first + j] = 1;
             }
           }
         }
         if (!any_winner) std::fill(wanted.begin(), wanted.end(), 1);
       }
       const size_t tile = static_cast<size_t>(ty) * tx_n + tx;
-      for (int j = 0; j < n; ++j) {
-        const bool meets = planes[j].family != FM_FAMILY_GROUND || ground_hit;
-        active[j * tiles + tile] = (wanted[j] && meets) ? 1 : 0;
+      for (int f = 0; f < n_fam; ++f) {
+        const PlaneFamilyRun& fam = families[f];
+        for (int j = fam.first; j < fam.first + fam.count; ++j) active[j * tiles + tile] = (wanted[j] && hit[f]) ? 1 : 0;
       }
     }
   }
@@ -277,6 +317,29 @@ std::vector<FmSweepPlane> makeSweepPlanes(const PlaneSweepConfig& config, const 
       p.d = static_cast<float>(d);
       p.family = FM_FAMILY_GROUND;
       planes.push_back(p);
+    }
+  }
+  if (T_base_ref && config.wall_planes > 0) {
+    // Plane y_base = +o (left) or -o (right): s e_y . (R X_ref + t) = o with
+    // s = +1 / -1, i.e. n . X_ref = d with n = s R^T e_y (pointing from the
+    // camera towards the wall) and d = o - s t_y. Uniform in 1 / o, nearest
+    // first (as the fronto-parallel planes).
+    const double inv_min = 1.0 / config.wall_min, inv_max = 1.0 / config.wall_max;
+    for (const int side : {1, -1}) {
+      const Eigen::Vector3d n = side * (T_base_ref->linear().transpose() * Eigen::Vector3d::UnitY());
+      const double ty = T_base_ref->translation().y();
+      for (int i = 0; i < config.wall_planes; ++i) {
+        const double o = 1.0 / (inv_min + (inv_max - inv_min) * i / (config.wall_planes - 1));
+        const double d = o - side * ty;
+        if (!(d > 0.0)) continue;  // the camera is beyond this wall
+        FmSweepPlane p{};
+        p.nx = static_cast<float>(n.x());
+        p.ny = static_cast<float>(n.y());
+        p.nz = static_cast<float>(n.z());
+        p.d = static_cast<float>(d);
+        p.family = side > 0 ? FM_FAMILY_WALL_LEFT : FM_FAMILY_WALL_RIGHT;
+        planes.push_back(p);
+      }
     }
   }
   return planes;

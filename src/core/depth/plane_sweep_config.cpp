@@ -127,6 +127,13 @@ const ParamTable<PlaneSweepConfig>& PlaneSweepConfig::params() {
                 "Lowest ground plane above the road", kRun)
         .number("ground_max", [](C& c) -> double& { return c.ground_max; }, R::any(), "m",
                 "Highest ground plane above the road (> ground_min)", kRun)
+        .number("wall_planes", [](C& c) -> int& { return c.wall_planes; }, R::atLeast(0), "",
+                "Vertical planes parallel to the driving direction on each side, for facades (0: none, else at "
+                "least 2)")
+        .number("wall_min", [](C& c) -> double& { return c.wall_min; }, R::above(0), "m",
+                "Nearest wall plane: lateral offset from the base frame's x-z plane", kRun)
+        .number("wall_max", [](C& c) -> double& { return c.wall_max; }, R::above(0), "m",
+                "Farthest wall plane's lateral offset (> wall_min); uniform in inverse offset between", kRun)
         .number("window_full", [](C& c) -> int& { return c.window_full; }, R::atLeast(3), "px",
                 "Matching window at full resolution (odd)")
         .number("window_half", [](C& c) -> int& { return c.window_half; }, R::atLeast(3), "px",
@@ -167,6 +174,10 @@ const ParamTable<PlaneSweepConfig>& PlaneSweepConfig::params() {
     t.rule([](const C& c) {
       require(c.ground_planes == 0 || c.ground_planes >= 2, "ground_planes",
               "must be 0 or at least 2, got " + std::to_string(c.ground_planes));
+      require(c.wall_planes == 0 || c.wall_planes >= 2, "wall_planes",
+              "must be 0 or at least 2, got " + std::to_string(c.wall_planes));
+      if (!(c.wall_max > c.wall_min))
+        requireInRange("wall_max", ParamRange::above(c.wall_min), c.wall_max, "m (greater than wall_min)");
       if (!(c.far > c.near)) requireInRange("far", ParamRange::above(c.near), c.far, "m (greater than near)");
       if (!(c.ground_max > c.ground_min))
         requireInRange("ground_max", ParamRange::above(c.ground_min), c.ground_max, "m (greater than ground_min)");

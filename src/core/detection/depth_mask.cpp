@@ -31,7 +31,33 @@ const ParamTable<DepthMaskConfig>& DepthMaskConfig::params() {
                    c.colour_near = v[0];
                    c.colour_far = v[1];
                  },
-                 "[near, far] of the colour scale of depth_masked/colour");
+                 "[near, far] of the colour scale of depth_masked/colour")
+        .flag("mask_parked", [](C& c) -> bool& { return c.mask_parked; },
+              "Mask parked vehicles too (false: only moving vehicles and those not decided yet)")
+        .number("moving_speed", [](C& c) -> double& { return c.motion.moving_speed; }, R::above(0), "m/s",
+                "A tracked vehicle this fast or faster moves; slower, it is parked")
+        .number("decide_after", [](C& c) -> double& { return c.motion.decide_after; }, R::atLeast(0), "s",
+                "Time a vehicle is tracked before it is called moving or parked (masked until then)")
+        .number("speed_window", [](C& c) -> double& { return c.motion.speed_window; }, R::above(0), "s",
+                "Track history a vehicle's speed is measured over")
+        .number("track_gate", [](C& c) -> double& { return c.motion.gate; }, R::above(0), "m",
+                "Largest distance of a box's vehicle from its track's predicted position")
+        .number("track_max_gap", [](C& c) -> double& { return c.motion.max_gap; }, R::above(0), "s",
+                "Time a track survives without a box")
+        .number("min_vehicle_points", [](C& c) -> int& { return c.motion.min_points; }, R::atLeast(1), "",
+                "Depth pixels a box needs to place its vehicle (fewer: undecided, masked)")
+        .number("vehicle_max_range", [](C& c) -> double& { return c.motion.max_range; }, R::above(0), "m",
+                "Depth beyond this does not place a vehicle")
+        .number("decide_range", [](C& c) -> double& { return c.motion.decide_range; }, R::above(0), "m",
+                "A vehicle farther from the camera is tracked, not measured (undecided until nearer)")
+        .number("border_px", [](C& c) -> double& { return c.motion.border_px; }, R::any(), "px",
+                "A box this near the image border is cut by it: it keeps its track's decision (negative: never)")
+        .number("duplicate_distance", [](C& c) -> double& { return c.motion.duplicate_distance; }, R::atLeast(0),
+                "m", "Boxes whose vehicles lie this close are one vehicle (one decision)")
+        .number("carve_time", [](C& c) -> double& { return c.motion.carve_time; }, R::atLeast(0), "s",
+                "Time the map carves free the region of a parked vehicle that drove off (0: never)")
+        .number("carve_half_size", [](C& c) -> double& { return c.motion.carve_half_size; }, R::above(0), "m",
+                "Half the side of that region, around where the vehicle was parked");
     t.rule([](const C& c) {
       if (!(c.colour_far > c.colour_near))
         requireInRange("colour_range", ParamRange::above(c.colour_near), c.colour_far, "m (far greater than near)");

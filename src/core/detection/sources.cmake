@@ -2,4 +2,5 @@
 set(FM_DETECTION_SOURCES
   detector.cpp
   depth_mask.cpp
+  vehicle_motion.cpp
 )

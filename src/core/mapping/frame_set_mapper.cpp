@@ -1,6 +1,7 @@
 #include "fisheye_mapping/core/mapping/frame_set_mapper.h"
 
 #include <chrono>
+#include <cmath>
 #include <stdexcept>
 #include <utility>
 
@@ -36,7 +37,8 @@ FrameSetMapper::FrameSetMapper(const Rig& rig, const FrameSetMapperConfig& confi
       depth_(rig, config.depth),
       detector_(std::move(detector)),
       map_(std::make_unique<TsdfMap>(config.tsdf)),
-      mesher_(config.tsdf.min_observations) {
+      mesher_(config.tsdf.min_observations),
+      motion_(config.mask.motion) {
   config_.validate();
 }
 
@@ -53,13 +55,13 @@ FrameSetResult FrameSetMapper::depthOf(const std::vector<cv::Mat>& images) {
 }
 
 FrameSetResult FrameSetMapper::process(const std::vector<cv::Mat>& images, const Eigen::Isometry3d& T_W_B,
-                                       const std::optional<ImageBoxes>& boxes) {
+                                       const std::optional<ImageBoxes>& boxes, double stamp_s) {
   flush();
   const auto t0 = Clock::now();
   FrameSetResult r = depthOf(images);
   double detect_ms = 0;
   const ImageBoxes use = boxesFor(images[depth_.reference()], boxes, &detect_ms);
-  r = maskAndFuse(std::move(r), use, T_W_B, depth_.rig().cameras[depth_.reference()]);
+  r = maskAndFuse(std::move(r), use, T_W_B, depth_.rig().cameras[depth_.reference()], stamp_s);
   r.ms.detect_ms = detect_ms;
   r.ms.total_ms = msSince(t0);
   return r;
@@ -75,14 +77,14 @@ FrameSetResult FrameSetMapper::processDepth(cv::Mat depth, const Eigen::Isometry
   r.ms.depth_ms = msSince(t0);
   double detect_ms = 0;
   r = maskAndFuse(std::move(r), boxesFor(cv::Mat(), boxes, &detect_ms), T_W_B,
-                  depth_.rig().cameras[depth_.reference()]);
+                  depth_.rig().cameras[depth_.reference()], std::numeric_limits<double>::quiet_NaN());
   r.ms.total_ms = msSince(t0);
   return r;
 }
 
 std::optional<FrameSetResult> FrameSetMapper::submit(const std::vector<cv::Mat>& images,
                                                      const Eigen::Isometry3d& T_W_B,
-                                                     const std::optional<ImageBoxes>& boxes) {
+                                                     const std::optional<ImageBoxes>& boxes, double stamp_s) {
   const auto t0 = Clock::now();
   if (images.size() <= static_cast<size_t>(depth_.reference())) {
     depthOf(images);  // the depth stage names what is wrong; nothing is started
@@ -110,9 +112,10 @@ std::optional<FrameSetResult> FrameSetMapper::submit(const std::vector<cv::Mat>&
   // The reference camera as now (the self-calibration of the next set may
   // change the rig while this one fuses).
   const RigCamera ref = depth_.rig().cameras[depth_.reference()];
-  pending_ = std::async(std::launch::async, [this, r = std::move(r), detection, timed_boxes, T_W_B, t0, ref]() mutable {
+  pending_ = std::async(std::launch::async,
+                        [this, r = std::move(r), detection, timed_boxes, T_W_B, t0, ref, stamp_s]() mutable {
     const ImageBoxes use = detection.get();
-    FrameSetResult out = maskAndFuse(std::move(r), use, T_W_B, ref);
+    FrameSetResult out = maskAndFuse(std::move(r), use, T_W_B, ref, stamp_s);
     out.ms.detect_ms = *timed_boxes;
     out.ms.total_ms = msSince(t0);
     return out;
@@ -141,16 +144,32 @@ ImageBoxes FrameSetMapper::boxesFor(const cv::Mat& reference_image, const std::o
 }
 
 FrameSetResult FrameSetMapper::maskAndFuse(FrameSetResult r, const ImageBoxes& use, const Eigen::Isometry3d& T_W_B,
-                                           const RigCamera& ref) {
+                                           const RigCamera& ref, double stamp_s) {
   const auto tm = Clock::now();
   cv::Mat& depth = r.depth.depth;
   const int bw = use.image_width > 0 ? use.image_width : depth.cols;
   const int bh = use.image_height > 0 ? use.image_height : depth.rows;
-  r.mask = maskDepthBoxes(depth, use.boxes, float(config_.mask.margin_px), bw, bh);
+  r.boxes = use;
+  std::vector<Detection> masked = use.boxes;
+  const bool tracked =
+      detector_ && std::isfinite(stamp_s) && depth.cols == ref.model.width() && depth.rows == ref.model.height();
+  if (tracked) {
+    // The detector's vehicles, placed by the unmasked depth: parked ones stay.
+    r.motion = motion_.update(use.boxes, bw, bh, depth, ref.model, T_W_B * ref.T_base_cam, stamp_s);
+    if (!config_.mask.mask_parked) {
+      masked.clear();
+      for (size_t i = 0; i < use.boxes.size(); ++i) {
+        if (r.motion[i].motion != VehicleMotion::Parked) masked.push_back(use.boxes[i]);
+      }
+    }
+  }
+  r.mask = maskDepthBoxes(depth, masked, float(config_.mask.margin_px), bw, bh);
   r.masked_pixels = size_t(cv::countNonZero(r.mask));
   r.ms.mask_ms = msSince(tm);
   const auto tf = Clock::now();
-  r.fusion = map_->integrate(depth, ref.model, T_W_B * ref.T_base_cam, T_W_B.translation());
+  // Parked vehicles that drove off: their regions are carved free.
+  const std::vector<Eigen::AlignedBox3d> carve = tracked ? motion_.ghostRegions() : std::vector<Eigen::AlignedBox3d>();
+  r.fusion = map_->integrate(depth, ref.model, T_W_B * ref.T_base_cam, T_W_B.translation(), carve);
   if (++frame_sets_ % size_t(config_.mesh_every) == 0) mesher_.update(*map_);
   r.ms.fuse_ms = msSince(tf);
   return r;

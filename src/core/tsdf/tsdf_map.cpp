@@ -53,7 +53,8 @@ const TsdfMap::RayTable& TsdfMap::raysFor(const CameraModel& camera) {
 }
 
 IntegrationStats TsdfMap::integrate(const cv::Mat& depth, const CameraModel& camera,
-                                    const Eigen::Isometry3d& T_W_C, const Eigen::Vector3d& vehicle_W) {
+                                    const Eigen::Isometry3d& T_W_C, const Eigen::Vector3d& vehicle_W,
+                                    const std::vector<Eigen::AlignedBox3d>& carve) {
   if (depth.type() != CV_32FC1) {
     throw std::invalid_argument("depth image must be 32FC1 (metres of range along the ray), got OpenCV type " +
                                 std::to_string(depth.type()));
@@ -133,6 +134,19 @@ IntegrationStats TsdfMap::integrate(const cv::Mat& depth, const CameraModel& cam
     for (const auto& b : list) {
       if (store_->insideLocalMap(b)) touched.insert(b);
     }
+  }
+  // Carve regions: their blocks in memory, however far from this frame's surfaces.
+  for (const Eigen::AlignedBox3d& region : carve) {
+    if (region.isEmpty() || !region.min().allFinite() || !region.max().allFinite()) continue;
+    const Eigen::Vector3i lo = (region.min() / config_.blockSize()).array().floor().cast<int>();
+    const Eigen::Vector3i hi = (region.max() / config_.blockSize()).array().floor().cast<int>();
+    if (((hi - lo).array() > 256).any()) continue;  // not a vehicle's region
+    for (int x = lo.x(); x <= hi.x(); ++x)
+      for (int y = lo.y(); y <= hi.y(); ++y)
+        for (int z = lo.z(); z <= hi.z(); ++z) {
+          const BlockIndex b(x, y, z);
+          if (store_->isActive(b) && store_->insideLocalMap(b)) touched.insert(b);
+        }
   }
   stats.blocks_touched = touched.size();
   const BlockWork work = store_->allocate(touched, &stats.blocks_allocated, &stats.blocks_swapped_in);

@@ -2,10 +2,14 @@
 // Häne et al. 2014): a reference view and any number of supporting views with
 // known poses, each with its own camera model, no rectification.
 //
-// Two plane families in the reference camera's frame: `fronto_planes` planes
+// Plane families in the reference camera's frame: `fronto_planes` planes
 // parallel to its image plane, uniform in inverse depth over [near, far] (z),
-// and `ground_planes` planes parallel to the ground (z = 0 in the base frame,
-// from the mount), at heights [ground_min, ground_max]. Cost: (1 - ZNCC) / 2
+// `ground_planes` planes parallel to the ground (z = 0 in the base frame,
+// from the mount), at heights [ground_min, ground_max], and `wall_planes` on
+// each side: vertical planes parallel to the driving direction (the base
+// frame's x-z plane) at lateral offsets [wall_min, wall_max] left and right
+// of it, uniform in inverse offset, for the facades and parked cars' flanks
+// that the front cameras see at grazing angles. Cost: (1 - ZNCC) / 2
 // over a window (9x9 at full resolution, 7x7 at half), aggregated over the
 // supporting views (mean, or mean of the best k); winner takes all with
 // parabolic sub-plane refinement.
@@ -111,6 +115,13 @@ struct PlaneSweepConfig {
   double ground_height = 0.0;
   double ground_min = -0.3;      // plane heights above the ground (ground_height), metres
   double ground_max = 0.3;
+  // Planes on each side parallel to the base frame's x-z plane (y_base =
+  // +offset left, -offset right), offsets [wall_min, wall_max] from it,
+  // metres, uniform in inverse offset; 0 disables the family. Only with a
+  // mount, like the ground planes.
+  int wall_planes = 0;
+  double wall_min = 1.5;
+  double wall_max = 20.0;
   // Matching.
   int window_full = 9;           // odd window sizes
   int window_half = 7;

@@ -35,6 +35,8 @@ FM_FN float fm_clampf(float x, float lo, float hi) { return x >= lo ? (x <= hi ?
 #define FM_COST_INVALID 2.0f
 #define FM_FAMILY_FRONTO 0 /* parallel to the reference image plane; d = z-depth */
 #define FM_FAMILY_GROUND 1 /* parallel to the ground */
+#define FM_FAMILY_WALL_LEFT 2  /* vertical, parallel to the driving direction, left of the base */
+#define FM_FAMILY_WALL_RIGHT 3 /* the same, right of the base */
 #define FM_AGGREGATE_AVERAGE 0
 #define FM_AGGREGATE_BEST_K 1
 /* A window whose intensity standard deviation is below this (image values in
@@ -204,7 +206,9 @@ FM_FN float fm_aggregate(const float* costs, int views, int mode, int k) {
  *      along the ray, and the range of the best plane refined (when
  *      `subpixel`) by the vertex of the parabola through the costs of the
  *      best plane and its two neighbours: inverse depth is interpolated for
- *      fronto-parallel planes, the plane's offset for ground planes;
+ *      fronto-parallel and wall planes (uniform in inverse depth / inverse
+ *      lateral offset), the plane's offset for ground planes (uniform in
+ *      height);
  *   3. second = the lowest cost among the planes fm_select_second_candidate
  *      accepts: not the best or its neighbours, and whose range lies outside
  *      [lo, hi] (so a plane of the other family through the same point does
@@ -241,7 +245,7 @@ FM_FN float fm_select_refine(const FM_GLOBAL float* volume, int stride, const FM
       off = off > 0.5f ? 0.5f : (off < -0.5f ? -0.5f : off);
       float d_other = off >= 0.0f ? planes[next].d : planes[prev].d;
       float a = off >= 0.0f ? off : -off;
-      if (pb.family == FM_FAMILY_FRONTO) {
+      if (pb.family != FM_FAMILY_GROUND) {
         d = 1.0f / (1.0f / pb.d + a * (1.0f / d_other - 1.0f / pb.d));
       } else {
         d = pb.d + a * (d_other - pb.d);

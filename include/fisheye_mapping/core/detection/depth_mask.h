@@ -4,6 +4,7 @@
 #define FISHEYE_MAPPING_CORE_DETECTION_DEPTH_MASK_H_
 
 #include "fisheye_mapping/core/detection/detector.h"
+#include "fisheye_mapping/core/detection/vehicle_motion.h"
 
 #include <opencv2/core.hpp>
 
@@ -31,6 +32,11 @@ struct DepthMaskConfig {
   /// masked depth, metres; 0 < near < far.
   double colour_near = 1.0;
   double colour_far = 30.0;
+  /// Parked vehicles masked too (every detected vehicle, as before issue 31);
+  /// false: only the moving ones and those not decided yet
+  /// (VehicleMotionTracker), so that parked cars stay in the map.
+  bool mask_parked = false;
+  VehicleMotionConfig motion;
 
   /// Throws std::invalid_argument naming the parameter and the bad value.
   void validate() const;

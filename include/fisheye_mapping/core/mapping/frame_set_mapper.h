@@ -10,6 +10,7 @@
 
 #include <atomic>
 #include <future>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <vector>
@@ -68,6 +69,12 @@ struct FrameSetResult {
   // (submit() hands results back a frame set late, when it may have moved on).
   std::vector<CameraCalibrationState> calibration;
   std::optional<Rig> calibrated_rig;
+  // The boxes of the frame set (the detector's or the given ones) and, for
+  // the detector's, whether each vehicle moves (VehicleMotionTracker; empty
+  // without a stamp or with given boxes, which are all masked). Masked: the
+  // moving and undecided ones (all with mask.mask_parked).
+  ImageBoxes boxes;
+  std::vector<VehicleMotionTracker::Decision> motion;
 };
 
 class FrameSetMapper {
@@ -77,10 +84,13 @@ class FrameSetMapper {
   FrameSetMapper(const Rig& rig, const FrameSetMapperConfig& config, std::unique_ptr<Detector> detector = nullptr);
 
   // One frame set: images[i] of rig camera i, T_W_B the base's pose in the
-  // world (map) frame at the frame set's stamp. `boxes` are used when there is
-  // no detector. Not thread-safe.
+  // world (map) frame at the frame set's stamp (stamp_s, seconds: what the
+  // detector's vehicles are tracked by; NaN: no tracking, every detected
+  // vehicle masked). `boxes` are used when there is no detector. Not
+  // thread-safe.
   FrameSetResult process(const std::vector<cv::Mat>& images, const Eigen::Isometry3d& T_W_B,
-                         const std::optional<ImageBoxes>& boxes = std::nullopt);
+                         const std::optional<ImageBoxes>& boxes = std::nullopt,
+                         double stamp_s = std::numeric_limits<double>::quiet_NaN());
   // The same with a given depth map of the reference camera instead of the
   // sweep (e.g. ground-truth depth: the evaluation's reference map).
   FrameSetResult processDepth(cv::Mat depth, const Eigen::Isometry3d& T_W_B,
@@ -95,7 +105,8 @@ class FrameSetMapper {
   // next submit() or flush() (that frame set is lost, the map keeps the
   // others). process() and processDepth() flush first. Not thread-safe.
   std::optional<FrameSetResult> submit(const std::vector<cv::Mat>& images, const Eigen::Isometry3d& T_W_B,
-                                       const std::optional<ImageBoxes>& boxes = std::nullopt);
+                                       const std::optional<ImageBoxes>& boxes = std::nullopt,
+                                       double stamp_s = std::numeric_limits<double>::quiet_NaN());
   std::optional<FrameSetResult> flush();
   // Brings the mesh up to date with the map (after the last frame set;
   // flushes a submitted one first).
@@ -114,8 +125,10 @@ class FrameSetMapper {
   // The boxes to mask: the detector's on the reference image, else `given`
   // (none: nothing masked).
   ImageBoxes boxesFor(const cv::Mat& reference_image, const std::optional<ImageBoxes>& given, double* ms);
+  // Masks the boxes (with a stamp, the detector's parked vehicles are kept)
+  // and fuses.
   FrameSetResult maskAndFuse(FrameSetResult r, const ImageBoxes& boxes, const Eigen::Isometry3d& T_W_B,
-                             const RigCamera& reference);
+                             const RigCamera& reference, double stamp_s);
   // The depth stage's result for the images, with the calibration snapshot.
   FrameSetResult depthOf(const std::vector<cv::Mat>& images);
   FrameSetMapperConfig config_;
@@ -123,6 +136,7 @@ class FrameSetMapper {
   std::unique_ptr<Detector> detector_;
   std::unique_ptr<TsdfMap> map_;
   TsdfMesher mesher_;
+  VehicleMotionTracker motion_;
   std::atomic<size_t> frame_sets_{0};
   // submit(): the previous frame set's detection and masking + fusion.
   std::shared_future<ImageBoxes> detection_;

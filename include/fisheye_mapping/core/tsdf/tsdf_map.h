@@ -73,10 +73,14 @@ class TsdfMap {
   // along each pixel's ray, NaN (or <= 0, or inf) where invalid. T_W_C is the
   // camera pose in the world; vehicle_W the vehicle position (world, metres),
   // which places the local map (blocks leaving it are swapped out after the
-  // update). Throws std::invalid_argument (map untouched) for a wrong
-  // encoding or size, or a non-finite pose.
+  // update). `carve`: world regions whose blocks in memory are fused too,
+  // though no ray ends near them: their voxels in front of what the depth
+  // sees now are carved free (a parked car that drove off leaves no ghost;
+  // VehicleMotionTracker::ghostRegions). Throws std::invalid_argument (map
+  // untouched) for a wrong encoding or size, or a non-finite pose.
   IntegrationStats integrate(const cv::Mat& depth, const CameraModel& camera,
-                             const Eigen::Isometry3d& T_W_C, const Eigen::Vector3d& vehicle_W);
+                             const Eigen::Isometry3d& T_W_C, const Eigen::Vector3d& vehicle_W,
+                             const std::vector<Eigen::AlignedBox3d>& carve = {});
 
   // Moves the local map to the vehicle (world, metres): active blocks outside
   // the new box are swapped out, stored blocks inside it swapped back in.

@@ -1,0 +1,127 @@
+// Which detected vehicles move (issue 31): parked cars belong to the static
+// street a planner needs, so only moving vehicles, and those not decided
+// yet, are masked out of the depth before fusion. No ROS.
+//
+// Each box is placed in the world from the depth inside it: the pixels of
+// its inner part (the box shrunk, to leave out the background around the
+// body), the nearest cluster of their ranges (the body, not the road or
+// facade seen past it), and the median of those points' world x and y.
+// Boxes are tracked across frame sets by that position (nearest track within
+// a gate around its prediction); a track's speed is the slope of a
+// least-squares line through its positions of the last `speed_window`
+// seconds. Only vehicles within `decide_range` of the camera are measured
+// (farther, stereo depth is too coarse to tell a parked car from a slow one;
+// the map fuses nearer depth only). A vehicle is decided once tracked for
+// `decide_after` seconds: moving at `moving_speed` or faster, else parked.
+// A vehicle once seen moving stays moving. A box cut by the image border
+// only shows part of its vehicle, a part that changes as the vehicle leaves
+// the view (a parked car passed by seems to move along with the ego), so it
+// keeps its track's decision and position for the association but does not
+// measure speed. A second box on an already tracked vehicle (within
+// `duplicate_distance` of a box of this frame set, e.g. "car" and "truck" on
+// one vehicle) gets that box's decision. Undecided: a new or lost track, a
+// box with too little depth (glass, dark paint), or no pose for the frame
+// set.
+//
+// A vehicle that was parked (so fused into the map) and then drives off
+// leaves a ghost in the map: its region (a box of carve_half_size around
+// where it was parked) is handed out by ghostRegions() for carve_time
+// seconds, for the map to carve free where the space behind it is seen
+// (TsdfMap::integrate's carve regions).
+#ifndef FISHEYE_MAPPING_CORE_DETECTION_VEHICLE_MOTION_H_
+#define FISHEYE_MAPPING_CORE_DETECTION_VEHICLE_MOTION_H_
+
+#include <cstdint>
+#include <deque>
+#include <limits>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Geometry>
+#include <Eigen/StdVector>
+#include <opencv2/core.hpp>
+
+#include "fisheye_mapping/core/camera/camera_model.h"
+#include "fisheye_mapping/core/detection/detector.h"
+
+namespace fisheye_mapping {
+
+enum class VehicleMotion : uint8_t { Undecided = 0, Moving = 1, Parked = 2 };
+const char* toString(VehicleMotion m);
+
+struct VehicleMotionConfig {
+  double moving_speed = 2.5;   ///< m/s: a vehicle this fast or faster moves
+  double decide_after = 0.3;   ///< s a vehicle is tracked before it is decided
+  double speed_window = 1.0;   ///< s of track history the speed is measured over
+  double gate = 2.5;           ///< m a box may lie from its track's prediction
+  double max_gap = 1.0;        ///< s a track survives unseen
+  int min_points = 20;         ///< depth pixels a box needs for a position
+  double max_range = 40.0;     ///< m: farther depth does not place a vehicle
+  double decide_range = 25.0;  ///< m: a vehicle farther from the camera is tracked but not measured
+  double border_px = 3.0;      ///< px (of the detection image): a box this near the border is cut by it
+  double duplicate_distance = 1.0;  ///< m between two boxes of one vehicle
+  double carve_time = 10.0;         ///< s a departed parked vehicle's region is carved; 0: never
+  double carve_half_size = 3.0;     ///< m: half the side of that region (horizontal)
+};
+
+class VehicleMotionTracker {
+ public:
+  struct Decision {
+    VehicleMotion motion = VehicleMotion::Undecided;
+    int track = -1;                                                 ///< track id; -1: no position
+    double speed = std::numeric_limits<double>::quiet_NaN();        ///< m/s; NaN until measurable
+    Eigen::Vector3d position = Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
+  };
+
+  explicit VehicleMotionTracker(const VehicleMotionConfig& config = VehicleMotionConfig());
+
+  /// Decides every box. `boxes` are in pixels of an image_w x image_h image
+  /// (scaled to the depth's size when it differs); `depth`: CV_32FC1 range
+  /// along the rays of `camera` (the depth's size), NaN invalid, before any
+  /// masking; T_W_C: the camera's pose in the world at the frame set, none
+  /// when unknown (every box undecided, the tracks kept). A stamp before the
+  /// last one resets the tracks. Throws std::invalid_argument on a depth that
+  /// is not CV_32FC1 or not of the camera's size, a non-positive image size,
+  /// or a non-finite stamp.
+  std::vector<Decision> update(const std::vector<Detection>& boxes, int image_w, int image_h, const cv::Mat& depth,
+                               const CameraModel& camera, const std::optional<Eigen::Isometry3d>& T_W_C,
+                               double stamp_s);
+  void reset();
+  size_t tracks() const { return tracks_.size(); }
+  const VehicleMotionConfig& config() const { return config_; }
+  /// The world regions of parked vehicles that drove off within the last
+  /// carve_time seconds (of the last update's stamp).
+  std::vector<Eigen::AlignedBox3d> ghostRegions() const;
+
+  /// The world position of the vehicle in `box` (see the top of the file),
+  /// none with fewer than min_points usable depth pixels.
+  std::optional<Eigen::Vector3d> place(const Detection& box, int image_w, int image_h, const cv::Mat& depth,
+                                       const CameraModel& camera, const Eigen::Isometry3d& T_W_C) const;
+
+ private:
+  struct Track {
+    int id = 0;
+    // (stamp, position) of the boxes inside the image, over speed_window.
+    std::deque<std::pair<double, Eigen::Vector3d>> history;
+    double last_seen = 0.0;            // any box, cut or not
+    Eigen::Vector3d last_position;     // of that box
+    double first_seen = 0.0;
+    VehicleMotion state = VehicleMotion::Undecided;
+    Eigen::Vector3d parked_position;   // the last one while parked
+    double speed() const;
+  };
+  struct Ghost {
+    Eigen::AlignedBox3d region;
+    double until = 0.0;
+  };
+  std::vector<Ghost> ghosts_;
+  VehicleMotionConfig config_;
+  std::vector<Track> tracks_;
+  int next_id_ = 0;
+  double last_stamp_ = -std::numeric_limits<double>::infinity();
+};
+
+}  // namespace fisheye_mapping
+
+#endif  // FISHEYE_MAPPING_CORE_DETECTION_VEHICLE_MOTION_H_

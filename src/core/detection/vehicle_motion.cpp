@@ -1,0 +1,232 @@
+#include "fisheye_mapping/core/detection/vehicle_motion.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+#include <tuple>
+
+namespace fisheye_mapping {
+
+const char* toString(VehicleMotion m) {
+  switch (m) {
+    case VehicleMotion::Moving:
+      return "moving";
+    case VehicleMotion::Parked:
+      return "parked";
+    default:
+      return "undecided";
+  }
+}
+
+VehicleMotionTracker::VehicleMotionTracker(const VehicleMotionConfig& config) : config_(config) {}
+
+void VehicleMotionTracker::reset() {
+  tracks_.clear();
+  ghosts_.clear();
+  last_stamp_ = -std::numeric_limits<double>::infinity();
+}
+
+double VehicleMotionTracker::Track::speed() const {
+  if (history.size() < 2) return std::numeric_limits<double>::quiet_NaN();
+  const double dt = history.back().first - history.front().first;
+  if (!(dt > 0.0)) return std::numeric_limits<double>::quiet_NaN();
+  // Least-squares velocity of x(t), y(t): less noisy than the end points.
+  double mt = 0.0;
+  Eigen::Vector2d mp = Eigen::Vector2d::Zero();
+  for (const auto& h : history) {
+    mt += h.first;
+    mp += h.second.head<2>();
+  }
+  mt /= history.size();
+  mp /= double(history.size());
+  double stt = 0.0;
+  Eigen::Vector2d stp = Eigen::Vector2d::Zero();
+  for (const auto& h : history) {
+    stt += (h.first - mt) * (h.first - mt);
+    stp += (h.first - mt) * (h.second.head<2>() - mp);
+  }
+  return stt > 0.0 ? (stp / stt).norm() : std::numeric_limits<double>::quiet_NaN();
+}
+
+std::vector<Eigen::AlignedBox3d> VehicleMotionTracker::ghostRegions() const {
+  std::vector<Eigen::AlignedBox3d> out;
+  for (const Ghost& g : ghosts_) out.push_back(g.region);
+  return out;
+}
+
+std::optional<Eigen::Vector3d> VehicleMotionTracker::place(const Detection& box, int image_w, int image_h,
+                                                           const cv::Mat& depth, const CameraModel& camera,
+                                                           const Eigen::Isometry3d& T_W_C) const {
+  if (!std::isfinite(box.x_min) || !std::isfinite(box.y_min) || !std::isfinite(box.x_max) || !std::isfinite(box.y_max))
+    return std::nullopt;
+  const double sx = double(depth.cols) / image_w, sy = double(depth.rows) / image_h;
+  // The inner part: a fifth off each side and the top, a quarter off the
+  // bottom (the road under the body).
+  const double bw = (box.x_max - box.x_min) * sx, bh = (box.y_max - box.y_min) * sy;
+  if (!(bw > 0.0) || !(bh > 0.0)) return std::nullopt;
+  const int u0 = std::max(0, int(std::ceil(box.x_min * sx + 0.2 * bw)));
+  const int u1 = std::min(depth.cols - 1, int(std::floor(box.x_max * sx - 0.2 * bw)));
+  const int v0 = std::max(0, int(std::ceil(box.y_min * sy + 0.2 * bh)));
+  const int v1 = std::min(depth.rows - 1, int(std::floor(box.y_max * sy - 0.25 * bh)));
+  if (u1 < u0 || v1 < v0) return std::nullopt;
+  // At most about 40 x 40 samples per box.
+  const int step = std::max(1, std::max(u1 - u0, v1 - v0) / 40);
+  std::vector<std::pair<float, Eigen::Vector3d>> pts;  // (range, camera-frame point)
+  for (int v = v0; v <= v1; v += step) {
+    const float* d = depth.ptr<float>(v);
+    for (int u = u0; u <= u1; u += step) {
+      const float r = d[u];
+      if (!(r > 0.0f) || !(r <= config_.max_range)) continue;
+      Eigen::Vector3d ray;
+      if (!camera.unproject(Eigen::Vector2d(u + 0.5, v + 0.5), &ray)) continue;
+      pts.emplace_back(r, r * ray.normalized());
+    }
+  }
+  if (static_cast<int>(pts.size()) < config_.min_points) return std::nullopt;
+  // The body: the nearest cluster of ranges (up to 2.5 m beyond the 20th
+  // percentile, a car's depth seen from any side).
+  std::vector<float> ranges;
+  ranges.reserve(pts.size());
+  for (const auto& p : pts) ranges.push_back(p.first);
+  const size_t q = ranges.size() / 5;
+  std::nth_element(ranges.begin(), ranges.begin() + q, ranges.end());
+  const float limit = ranges[q] + 2.5f;
+  std::vector<double> xs, ys, zs;
+  for (const auto& p : pts) {
+    if (p.first > limit) continue;
+    const Eigen::Vector3d w = T_W_C * p.second;
+    xs.push_back(w.x());
+    ys.push_back(w.y());
+    zs.push_back(w.z());
+  }
+  if (static_cast<int>(xs.size()) < config_.min_points) return std::nullopt;
+  auto median = [](std::vector<double>& v) {
+    std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+    return v[v.size() / 2];
+  };
+  return Eigen::Vector3d(median(xs), median(ys), median(zs));
+}
+
+std::vector<VehicleMotionTracker::Decision> VehicleMotionTracker::update(
+    const std::vector<Detection>& boxes, int image_w, int image_h, const cv::Mat& depth, const CameraModel& camera,
+    const std::optional<Eigen::Isometry3d>& T_W_C, double stamp_s) {
+  if (!std::isfinite(stamp_s)) throw std::invalid_argument("vehicle motion: the stamp is not finite");
+  if (image_w <= 0 || image_h <= 0)
+    throw std::invalid_argument("vehicle motion: the detection image size must be positive, got " +
+                                std::to_string(image_w) + " x " + std::to_string(image_h));
+  if (depth.type() != CV_32FC1) throw std::invalid_argument("vehicle motion: depth must be 32FC1");
+  if (depth.cols != camera.width() || depth.rows != camera.height())
+    throw std::invalid_argument("vehicle motion: depth is " + std::to_string(depth.cols) + " x " +
+                                std::to_string(depth.rows) + ", its camera " + std::to_string(camera.width()) +
+                                " x " + std::to_string(camera.height()));
+  if (stamp_s < last_stamp_) reset();  // time went backwards (a replayed bag)
+  last_stamp_ = stamp_s;
+  // Tracks unseen for too long are gone.
+  tracks_.erase(std::remove_if(tracks_.begin(), tracks_.end(),
+                               [&](const Track& t) { return stamp_s - t.last_seen > config_.max_gap; }),
+                tracks_.end());
+  ghosts_.erase(std::remove_if(ghosts_.begin(), ghosts_.end(), [&](const Ghost& g) { return stamp_s > g.until; }),
+                ghosts_.end());
+  std::vector<Decision> out(boxes.size());
+  if (!T_W_C) return out;  // no pose: nothing can be placed
+  std::vector<std::optional<Eigen::Vector3d>> pos(boxes.size());
+  std::vector<char> cut(boxes.size(), 0);
+  const double m = config_.border_px;
+  for (size_t i = 0; i < boxes.size(); ++i) {
+    pos[i] = place(boxes[i], image_w, image_h, depth, camera, *T_W_C);
+    if (pos[i]) out[i].position = *pos[i];
+    const Detection& b = boxes[i];
+    cut[i] = b.x_min <= m || b.y_min <= m || b.x_max >= image_w - m || b.y_max >= image_h - m;
+    // Too far to measure: tracked like a cut box.
+    if (pos[i] && (*pos[i] - T_W_C->translation()).norm() > config_.decide_range) cut[i] = 1;
+  }
+  // Greedy association, nearest pairs first, within the gate around each
+  // track's prediction (its last position moved on at its speed).
+  std::vector<std::tuple<double, size_t, size_t>> pairs;  // (distance, box, track)
+  for (size_t t = 0; t < tracks_.size(); ++t) {
+    const Track& tr = tracks_[t];
+    Eigen::Vector2d predicted = tr.last_position.head<2>();
+    if (tr.history.size() >= 2) {
+      const auto& a = tr.history.front();
+      const auto& b = tr.history.back();
+      if (b.first > a.first)
+        predicted += (b.second - a.second).head<2>() / (b.first - a.first) * (stamp_s - tr.last_seen);
+    }
+    for (size_t i = 0; i < boxes.size(); ++i) {
+      if (!pos[i]) continue;
+      const double dist = (pos[i]->head<2>() - predicted).norm();
+      if (dist <= config_.gate) pairs.emplace_back(dist, i, t);
+    }
+  }
+  std::sort(pairs.begin(), pairs.end());
+  std::vector<int> box_track(boxes.size(), -1);
+  std::vector<char> track_used(tracks_.size(), 0);
+  for (const auto& [dist, i, t] : pairs) {
+    if (box_track[i] >= 0 || track_used[t]) continue;
+    box_track[i] = static_cast<int>(t);
+    track_used[t] = 1;
+  }
+  std::vector<size_t> unmatched;
+  for (size_t i = 0; i < boxes.size(); ++i) {
+    if (!pos[i]) continue;  // undecided: no position
+    if (box_track[i] < 0) {
+      unmatched.push_back(i);
+      continue;
+    }
+    Track& tr = tracks_[box_track[i]];
+    tr.last_seen = stamp_s;
+    tr.last_position = *pos[i];
+    out[i].track = tr.id;
+    if (!cut[i]) {
+      tr.history.emplace_back(stamp_s, *pos[i]);
+      while (tr.history.size() > 2 && stamp_s - tr.history[1].first >= config_.speed_window) tr.history.pop_front();
+      const double speed = tr.speed();
+      if (stamp_s - tr.first_seen + 1e-9 >= config_.decide_after && std::isfinite(speed)) {
+        if (speed >= config_.moving_speed) {
+          if (tr.state == VehicleMotion::Parked && config_.carve_time > 0) {
+            // Fused while parked, gone now: its region is carved.
+            const Eigen::Vector3d h(config_.carve_half_size, config_.carve_half_size, 0.0);
+            Ghost g;
+            g.region = Eigen::AlignedBox3d(tr.parked_position - h - Eigen::Vector3d(0, 0, 1.5),
+                                           tr.parked_position + h + Eigen::Vector3d(0, 0, 2.5));
+            g.until = stamp_s + config_.carve_time;
+            ghosts_.push_back(g);
+          }
+          tr.state = VehicleMotion::Moving;
+        } else if (tr.state != VehicleMotion::Moving) {
+          tr.state = VehicleMotion::Parked;
+          tr.parked_position = *pos[i];
+        }
+      }
+    }
+    out[i].speed = tr.speed();
+    out[i].motion = tr.state;  // a cut box keeps its track's decision
+  }
+  for (const size_t i : unmatched) {
+    // A second box on a vehicle tracked in this frame set: its decision.
+    int same = -1;
+    double best = config_.duplicate_distance;
+    for (size_t j = 0; j < boxes.size(); ++j) {
+      if (j == i || out[j].track < 0) continue;  // tracked now (matched or new)
+      const double dist = (pos[i]->head<2>() - pos[j]->head<2>()).norm();
+      if (dist <= best) best = dist, same = static_cast<int>(j);
+    }
+    if (same >= 0) {
+      out[i].track = out[same].track;
+      out[i].speed = out[same].speed;
+      out[i].motion = out[same].motion;
+      continue;
+    }
+    Track tr;
+    tr.id = next_id_++;
+    tr.first_seen = tr.last_seen = stamp_s;
+    tr.last_position = *pos[i];
+    if (!cut[i]) tr.history.emplace_back(stamp_s, *pos[i]);
+    tracks_.push_back(std::move(tr));
+    out[i].track = tracks_.back().id;  // undecided: new
+  }
+  return out;
+}
+
+}  // namespace fisheye_mapping
