@@ -9,34 +9,15 @@ within 0.25 m (completeness's tolerance); it was rejected by the observation
 rule when our cloud_all has a point within 0.25 m. Printed by road (< 0.3 m
 above z = 0) and structure, and by lateral distance from the driven path.
 """
+import os
 import sys
 
 import numpy as np
 import rosbag
 from scipy.spatial import cKDTree
 
-
-def pcd(path):
-    with open(path, "rb") as f:
-        hdr = {}
-        while True:
-            key, _, value = f.readline().decode().strip().partition(" ")
-            hdr[key] = value
-            if key == "DATA":
-                break
-        n = int(hdr["POINTS"])
-        fields = hdr["FIELDS"].split()
-        sizes = [int(s) for s in hdr["SIZE"].split()]
-        stride = sum(sizes)
-        if hdr["DATA"] == "ascii":
-            a = np.loadtxt(f, ndmin=2)
-            return a[:, [fields.index(c) for c in "xyz"]]
-        raw = np.frombuffer(f.read(stride * n), dtype=np.uint8).reshape(n, stride)
-        cols = []
-        for c in "xyz":
-            off = sum(sizes[: fields.index(c)])
-            cols.append(raw[:, off : off + 4].copy().view(np.float32).ravel())
-        return np.stack(cols, 1)
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tools"))
+from topdown_png import read_pcd as pcd  # noqa: E402
 
 
 def main():

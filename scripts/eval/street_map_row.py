@@ -5,30 +5,13 @@ import os
 import statistics
 import sys
 
-import numpy as np
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tools"))
+from topdown_png import read_pcd  # noqa: E402
 
 
 def pcd_z(path):
-    """z of every point of a PCD file (binary or ASCII, float32 x y z first)."""
-    with open(path, "rb") as f:
-        header = {}
-        while True:
-            line = f.readline()
-            if not line:
-                raise SystemExit(f"street_map_row: {path}: no DATA line")
-            key, _, value = line.decode().strip().partition(" ")
-            header[key] = value
-            if key == "DATA":
-                break
-        fields = header["FIELDS"].split()
-        sizes = [int(s) for s in header["SIZE"].split()]
-        count = int(header["POINTS"])
-        if header["DATA"] == "ascii":
-            return np.loadtxt(f, ndmin=2)[:, fields.index("z")]
-        stride = sum(sizes)
-        raw = np.frombuffer(f.read(stride * count), dtype=np.uint8).reshape(count, stride)
-        off = sum(sizes[: fields.index("z")])
-        return raw[:, off : off + 4].copy().view(np.float32).ravel()
+    """z of every point of a PCD file (scripts/tools/topdown_png.py's reader)."""
+    return read_pcd(path)[:, 2]
 
 
 def main():

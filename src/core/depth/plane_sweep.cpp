@@ -212,10 +212,9 @@ std::vector<PlaneFamilyRun> planeFamilies(const std::vector<FmSweepPlane>& plane
 // rays), and, with a prior, the plane lies within prior->planes_each_side
 // planes of its family of a coarser scale's winner under the tile or beside
 // it (every plane when there is none).
-std::vector<uint8_t> planeActivity(const PlaneSweepConfig& config, const cv::Mat& live, const std::vector<float>& rays,
+std::vector<uint8_t> planeActivity(const cv::Mat& live, const std::vector<float>& rays,
                                    const std::vector<FmSweepPlane>& planes, const CoarsePrior* prior, int* tiles_x,
                                    int* tiles_y) {
-  (void)config;
   const int w = live.cols, h = live.rows, T = FM_SWEEP_TILE;
   const int tx_n = (w + T - 1) / T, ty_n = (h + T - 1) / T;
   *tiles_x = tx_n;
@@ -526,7 +525,7 @@ DepthResult PlaneSweep::compute(const SweepView& ref, const std::vector<SweepVie
       swept_pairs += pairs;
       if (config_.skip_work) {
         level.active =
-            planeActivity(config_, *live, *level.rays, level_planes, prior, &level.tiles_x, &level.tiles_y);
+            planeActivity(*live, *level.rays, level_planes, prior, &level.tiles_x, &level.tiles_y);
         swept_pairs -= pairs - sweptPairs(level.active, level.width, level.height, level.tiles_x, level.tiles_y);
       }
       for (size_t k = 0; k < used.size(); ++k) {
