@@ -372,19 +372,35 @@ TEST(ConversionsMesh, OneTriangleMarker) {
   EXPECT_EQ(m.points[0].z, 0.0);
   EXPECT_EQ(m.points[2].x, 7.0);
   EXPECT_EQ(m.points[2].z, 6.0);
-  // Colour by height: z 0 -> (0.3, 0.35, 0.5); z 3 -> half way; z 6 (and above) -> (0.9, 0.85, 0.8).
-  EXPECT_FLOAT_EQ(m.colors[0].r, 0.3f);
-  EXPECT_FLOAT_EQ(m.colors[0].g, 0.35f);
-  EXPECT_FLOAT_EQ(m.colors[0].b, 0.5f);
-  EXPECT_FLOAT_EQ(m.colors[1].r, 0.6f);
-  EXPECT_FLOAT_EQ(m.colors[1].g, 0.6f);
-  EXPECT_FLOAT_EQ(m.colors[1].b, 0.65f);
-  EXPECT_FLOAT_EQ(m.colors[2].r, 0.9f);
-  EXPECT_FLOAT_EQ(m.colors[2].g, 0.85f);
-  EXPECT_FLOAT_EQ(m.colors[2].b, 0.8f);
+  // Intensity colour: the vertex's grey as r = g = b; a vertex without one
+  // (0) takes the height ramp over 0..6 m (z 6 m: the ramp's red end).
+  block.triangle_grey = {200, 51, 0};
+  const visualization_msgs::Marker mi = fm::meshBlockMarker(&block, 5, "map", stamp);
+  EXPECT_FLOAT_EQ(mi.colors[0].r, 200 / 255.0f);
+  EXPECT_FLOAT_EQ(mi.colors[0].g, 200 / 255.0f);
+  EXPECT_FLOAT_EQ(mi.colors[0].b, 200 / 255.0f);
+  EXPECT_FLOAT_EQ(mi.colors[1].r, 51 / 255.0f);
+  EXPECT_FLOAT_EQ(mi.colors[2].r, 1.0f);
+  EXPECT_FLOAT_EQ(mi.colors[2].g, 0.0f);
+  EXPECT_FLOAT_EQ(mi.colors[2].b, 0.0f);
+  // Height: z 0 blue (hue 240), z 3 hue 120 (green), z 6 red.
+  const visualization_msgs::Marker mh = fm::meshBlockMarker(&block, 5, "map", stamp, fm::MeshColoring::kHeight);
+  EXPECT_FLOAT_EQ(mh.colors[0].b, 1.0f);
+  EXPECT_FLOAT_EQ(mh.colors[0].r, 0.0f);
+  EXPECT_FLOAT_EQ(mh.colors[1].g, 1.0f);
+  EXPECT_FLOAT_EQ(mh.colors[1].r, 0.0f);
+  EXPECT_FLOAT_EQ(mh.colors[2].r, 1.0f);
+  // Normal: the face normal of (1,2,0) (4,5,3) (7,8,6) is degenerate (collinear
+  // points); a right triangle in the x-y plane has normal +z: (0.5, 0.5, 1).
+  fm::BlockOutput flat;
+  flat.triangles = {Eigen::Vector3f(0, 0, 0), Eigen::Vector3f(1, 0, 0), Eigen::Vector3f(0, 1, 0)};
+  const visualization_msgs::Marker mn = fm::meshBlockMarker(&flat, 6, "map", stamp, fm::MeshColoring::kNormal);
+  for (const auto& c : mn.colors) {
+    EXPECT_FLOAT_EQ(c.r, 128 / 255.0f);
+    EXPECT_FLOAT_EQ(c.g, 128 / 255.0f);
+    EXPECT_FLOAT_EQ(c.b, 1.0f);
+  }
   for (const auto& c : m.colors) EXPECT_EQ(c.a, 1.0f);
-  EXPECT_FLOAT_EQ(fm::meshVertexColour(-2.f).r, 0.3f);  // clamped below
-  EXPECT_FLOAT_EQ(fm::meshVertexColour(60.f).b, 0.8f);  // clamped above
 
   // An empty or missing block: DELETE of that id, same frame.
   const fm::BlockOutput empty;
@@ -425,9 +441,12 @@ TEST(ConversionsMesh, WholeMeshArray) {
 }
 
 TEST(ConversionsMesh, Cloud) {
-  pcl::PointCloud<pcl::PointXYZ> cloud;
-  cloud.push_back(pcl::PointXYZ(1, 2, 3));
-  cloud.push_back(pcl::PointXYZ(4, 5, 6));
+  pcl::PointCloud<pcl::PointXYZI> cloud;
+  pcl::PointXYZI a, b;
+  a.x = 1, a.y = 2, a.z = 3, a.intensity = 0;
+  b.x = 4, b.y = 5, b.z = 6, b.intensity = 77;
+  cloud.push_back(a);
+  cloud.push_back(b);
   const sensor_msgs::PointCloud2 msg = fm::toCloudMsg(cloud, "map", ros::Time(5, 6));
   EXPECT_EQ(msg.header.frame_id, "map");
   EXPECT_EQ(msg.header.stamp, ros::Time(5, 6));
@@ -439,6 +458,16 @@ TEST(ConversionsMesh, Cloud) {
   EXPECT_EQ(p[0], 4.f);
   EXPECT_EQ(p[1], 5.f);
   EXPECT_EQ(p[2], 6.f);
+  // The intensity field (the voxels' grey; 0 = none).
+  bool found = false;
+  for (const auto& f : msg.fields) {
+    if (f.name != "intensity") continue;
+    found = true;
+    float g;
+    std::memcpy(&g, &msg.data[msg.point_step + f.offset], sizeof(g));
+    EXPECT_EQ(g, 77.f);
+  }
+  EXPECT_TRUE(found);
 }
 
 // ---------------------------------------------------------------------------

@@ -223,6 +223,80 @@ TEST(TsdfMap, WallIntegrationFollowsTheRule) {
   EXPECT_GE(checked, 8);
 }
 
+// Intensity (issue 30): the grey of each pixel goes to the voxels near the
+// surface it sees, averaged with the weight (capped at FM_GREY_MAX_WEIGHT).
+// Truth: stripes painted on the wall by world y (the image value of a pixel is
+// the stripe of the wall point its ray hits), and the running average by hand.
+TEST(TsdfMap, IntensityFollowsThePaintOnTheWall) {
+  const CameraModel cam = CameraModel::pinhole(test::makeIntrinsics(100, 100, 63.5, 47.5, 128, 96));
+  const Eigen::Isometry3d T_W_C = lookAt(Eigen::Vector3d(0, 0, 1.0), Eigen::Vector3d(5, 0, 1.0));
+  Scene wall;
+  wall.ground = false;
+  wall.boxes.push_back({Eigen::Vector3d(5, -20, -20), Eigen::Vector3d(6, 20, 20)});
+  const cv::Mat depth = wall.render(cam, T_W_C);
+  // Stripes 0.5 m wide: grey 40 where floor(2 y) is even, 220 where odd.
+  auto paint = [](double y) { return (static_cast<int>(std::floor(2.0 * y)) % 2 == 0) ? 40 : 220; };
+  cv::Mat grey(cam.height(), cam.width(), CV_8UC1);
+  const std::vector<Eigen::Vector3f> rays = pixelRays(cam);
+  for (int v = 0; v < cam.height(); ++v)
+    for (int u = 0; u < cam.width(); ++u) {
+      const Eigen::Vector3d p = T_W_C * (depth.at<float>(v, u) * rays[v * cam.width() + u].cast<double>());
+      grey.at<uint8_t>(v, u) = static_cast<uint8_t>(paint(p.y()));
+    }
+  TsdfConfig cfg;
+  TsdfMap map(cfg);
+  map.integrate(depth, cam, T_W_C, Eigen::Vector3d::Zero(), {}, grey);
+  TsdfMesher mesher(1);
+  mesher.update(map);
+  const IndexedMesh mesh = mesher.indexedMesh();
+  ASSERT_GT(mesh.vertices.size(), 200u);
+  size_t checked = 0, right = 0;
+  for (size_t i = 0; i < mesh.vertices.size(); ++i) {
+    const double y = mesh.vertices[i].y();
+    const double frac = 2.0 * y - std::floor(2.0 * y);
+    if (frac < 0.1 || frac > 0.9) continue;  // within 5 cm of a stripe edge
+    ++checked;
+    right += mesh.grey[i] == paint(y) && mesh.colors[i][0] == paint(y) && mesh.colors[i][2] == paint(y);
+  }
+  ASSERT_GT(checked, 100u);
+  EXPECT_EQ(right, checked);
+  // The average: a second view of grey 100 everywhere gives (1 * stripe + 100) / 2.
+  map.integrate(depth, cam, T_W_C, Eigen::Vector3d::Zero(), {}, cv::Mat(grey.size(), CV_8UC1, cv::Scalar(100)));
+  // A voxel right on the wall at y = 0.25 (stripe 40) and y = 0.75 (220); x = 5 is a voxel border: x index 99.
+  const int on40 = map.grey(Eigen::Vector3i(99, 5, 20)), on220 = map.grey(Eigen::Vector3i(99, 15, 20));
+  EXPECT_EQ(on40, 70);
+  EXPECT_EQ(on220, 160);
+  // Without an image the intensity stays; with a wrong one the frame is refused.
+  map.integrate(depth, cam, T_W_C, Eigen::Vector3d::Zero());
+  EXPECT_EQ(map.grey(Eigen::Vector3i(99, 5, 20)), 70);
+  EXPECT_THROW(map.integrate(depth, cam, T_W_C, Eigen::Vector3d::Zero(), {}, cv::Mat(10, 10, CV_8UC1)),
+               std::invalid_argument);
+  EXPECT_THROW(map.integrate(depth, cam, T_W_C, Eigen::Vector3d::Zero(), {}, cv::Mat(grey.size(), CV_16UC1)),
+               std::invalid_argument);
+  // Normal colouring: the wall faces -x (towards the camera): red low, green and blue mid.
+  MeshExportOptions normal;
+  normal.coloring = MeshColoring::kNormal;
+  const IndexedMesh coloured = mesher.indexedMesh(normal);
+  size_t facing = 0;
+  for (const auto& c : coloured.colors) facing += c[0] < 30 && std::abs(int(c[1]) - 128) < 30;
+  EXPECT_GT(facing, coloured.colors.size() * 8 / 10);
+}
+
+TEST(TsdfUpdate, GreyAverageByHand) {
+  unsigned char g = 0;
+  fm_grey_update(&g, 0.0f, 200.0f);  // first: the value
+  EXPECT_EQ(g, 200);
+  fm_grey_update(&g, 1.0f, 100.0f);  // (1 * 200 + 100) / 2
+  EXPECT_EQ(g, 150);
+  fm_grey_update(&g, 2.0f, 0.0f);  // (2 * 150 + 0) / 3 = 100
+  EXPECT_EQ(g, 100);
+  fm_grey_update(&g, 50.0f, 255.0f);  // weight capped at 16: (16 * 100 + 255) / 17 = 109.1
+  EXPECT_EQ(g, 109);
+  unsigned char black = 0;
+  fm_grey_update(&black, 0.0f, 0.0f);  // black is stored as 1: 0 means none
+  EXPECT_EQ(black, 1);
+}
+
 // A parked car that drove off (issue 31): a box fused as a car, then the wall
 // behind it seen where it stood. Without a carve region the car stays in the
 // map (no ray ends near it any more); with its region the space in front of

@@ -30,6 +30,7 @@
 #include <std_srvs/Trigger.h>
 #include <tf2_eigen/tf2_eigen.h>
 #include <tf2_ros/transform_broadcaster.h>
+#include <nav_msgs/OccupancyGrid.h>
 #include <visualization_msgs/MarkerArray.h>
 
 #include "fisheye_mapping/FilePath.h"
@@ -189,7 +190,13 @@ class TsdfFusionNode : public ::testing::Test {
       ci_info_pub_.publish(cameraInfo(img.header));
       ci_depth_pub_.publish(img.toImageMsg());
     }
-    if (camchain) depth_pub_.publish(img.toImageMsg());
+    if (camchain) {
+      // The reference image (grey 150), whose grey the map's voxels take.
+      cv_bridge::CvImage grey(img.header, "mono8", cv::Mat(depth.size(), CV_8UC1, cv::Scalar(150)));
+      image_pub_.publish(grey.toImageMsg());
+      ros::WallDuration(0.01).sleep();  // the image first, as the camera's comes before its depth
+      depth_pub_.publish(img.toImageMsg());
+    }
   }
 
   // small_fisheye_camchain.yaml's cam0 written out as a CameraInfo: omni,
@@ -210,6 +217,7 @@ class TsdfFusionNode : public ::testing::Test {
   ros::NodeHandle nh_;
   ros::Publisher depth_pub_;
   ros::Publisher ci_depth_pub_ = nh_.advertise<sensor_msgs::Image>("ci/depth_masked/image", 50);
+  ros::Publisher image_pub_ = nh_.advertise<sensor_msgs::Image>("image", 50);
   ros::Publisher ci_info_pub_ = nh_.advertise<sensor_msgs::CameraInfo>("ci/depth_masked/camera_info", 50);
   ros::Subscriber cloud_sub_, mesh_sub_, diag_sub_;
   tf2_ros::TransformBroadcaster tf_;
@@ -258,6 +266,42 @@ TEST_F(TsdfFusionNode, FusesFramesAndServesTheMap) {
   for (const auto& p : cloud) near += std::abs(s.sdf(Eigen::Vector3d(p.x, p.y, p.z))) < 0.05;
   std::cout << cloud.size() << " cloud points, " << near << " within 5 cm of the surface\n";
   EXPECT_GE(near, cloud.size() * 98 / 100);
+  // Their intensity: the grey 150 of the images fused with the depth.
+  pcl::PointCloud<pcl::PointXYZI> grey_cloud;
+  pcl::fromROSMsg(*last_cloud, grey_cloud);
+  size_t grey150 = 0;
+  for (const auto& p : grey_cloud) grey150 += p.intensity == 150.0f;
+  EXPECT_GE(grey150, grey_cloud.size() * 95 / 100) << "points with the images' grey";
+  EXPECT_EQ(diagValue("frames fused with intensity"), "16");
+
+  // The obstacle grid: 40 x 40 m at 0.2 m in the map frame; its occupied
+  // cells stand on the scene's objects (a solid 0.35..2 m above the ground
+  // within a cell of them), and the ground around them is free.
+  nav_msgs::OccupancyGridConstPtr grid;
+  ros::Subscriber grid_sub = nh_.subscribe<nav_msgs::OccupancyGrid>(
+      "tsdf/occupancy", 1, boost::function<void(const nav_msgs::OccupancyGridConstPtr&)>([&grid](const auto& m) { grid = m; }));
+  ASSERT_TRUE(waitFor([&grid] { return grid != nullptr; }, 10.0)) << "no tsdf/occupancy";
+  EXPECT_EQ(grid->header.frame_id, "map");
+  EXPECT_EQ(grid->info.width, 200u);
+  EXPECT_EQ(grid->info.height, 200u);
+  EXPECT_FLOAT_EQ(grid->info.resolution, 0.2f);
+  size_t occupied = 0, on_object = 0, free_cells = 0;
+  for (uint32_t y = 0; y < grid->info.height; ++y)
+    for (uint32_t x = 0; x < grid->info.width; ++x) {
+      const int8_t v = grid->data[y * grid->info.width + x];
+      const double wx = grid->info.origin.position.x + (x + 0.5) * grid->info.resolution;
+      const double wy = grid->info.origin.position.y + (y + 0.5) * grid->info.resolution;
+      if (v == 0) ++free_cells;
+      if (v != 100) continue;
+      ++occupied;
+      double d = 1e9;
+      for (double z = 0.35; z <= 2.0; z += 0.05) d = std::min(d, s.sdf(Eigen::Vector3d(wx, wy, z)));
+      on_object += d < 0.2;
+    }
+  std::cout << occupied << " occupied cells, " << on_object << " on an object; " << free_cells << " free\n";
+  EXPECT_GT(occupied, 20u);
+  EXPECT_GE(on_object, occupied * 9 / 10);
+  EXPECT_GT(free_cells, 500u);
 
   ASSERT_TRUE(last_mesh != nullptr);
   {

@@ -4,8 +4,8 @@
 // failure; swap files deleted, damaged or unwritable lose at most their own
 // block, never the process; map_tool reads the same files. The truths are the
 // documented file layout (written and patched here byte by byte) and
-// snapshots of the map taken before each fault. Version 3 (compressed) is
-// read back here with zlib by its documented layout, record by record.
+// snapshots of the map taken before each fault. Versions 3 and 4 (compressed)
+// are read back here with zlib by their documented layout, record by record.
 #include <signal.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
@@ -70,11 +70,21 @@ TsdfConfig smallLocalMap(const std::string& swap_dir = "") {
   return cfg;
 }
 
+// A grey image of the camera's size with every value 0..255 (the map's
+// intensity channel; what it shows does not matter here).
+cv::Mat greyPattern(const CameraModel& cam) {
+  cv::Mat g(cam.height(), cam.width(), CV_8UC1);
+  for (int v = 0; v < g.rows; ++v)
+    for (int u = 0; u < g.cols; ++u) g.at<uint8_t>(v, u) = static_cast<uint8_t>((7 * u + 3 * v) % 256);
+  return g;
+}
+
 void drive(TsdfMap* map, double from, double to, double step) {
   const CameraModel cam = smallFisheye();
   const Scene s = street();
+  const cv::Mat grey = greyPattern(cam);
   for (double x = from; step > 0 ? x <= to : x >= to; x += step) {
-    map->integrate(s.render(cam, carCamera(x)), cam, carCamera(x), Eigen::Vector3d(x, 0, 0));
+    map->integrate(s.render(cam, carCamera(x)), cam, carCamera(x), Eigen::Vector3d(x, 0, 0), {}, grey);
   }
 }
 
@@ -89,8 +99,9 @@ Snapshot snapshot(const TsdfMap& map) {
   return out;
 }
 
-// The map holds exactly the snapshot's blocks, bit for bit.
-::testing::AssertionResult sameAs(const TsdfMap& map, const Snapshot& snap) {
+// The map holds exactly the snapshot's blocks, bit for bit (with_grey: their
+// intensities too).
+::testing::AssertionResult sameAs(const TsdfMap& map, const Snapshot& snap, bool with_grey = false) {
   if (map.numBlocks() != snap.size()) {
     return ::testing::AssertionFailure() << map.numBlocks() << " blocks, expected " << snap.size();
   }
@@ -100,6 +111,9 @@ Snapshot snapshot(const TsdfMap& map) {
     if (!b) return ::testing::AssertionFailure() << "block " << x << " " << y << " " << z << " missing";
     if (std::memcmp(b->voxels.data(), kv.second.voxels.data(), sizeof(b->voxels)) != 0) {
       return ::testing::AssertionFailure() << "block " << x << " " << y << " " << z << " differs";
+    }
+    if (with_grey && b->grey != kv.second.grey) {
+      return ::testing::AssertionFailure() << "block " << x << " " << y << " " << z << ": intensities differ";
     }
   }
   return ::testing::AssertionSuccess();
@@ -159,8 +173,12 @@ class MapFile : public ::testing::Test {
     snap_ = new Snapshot(snapshot(*map_));
     map_->save(*dir_ + "/good.fmtsdf", versionTwo());
     good_ = new std::string(readBytes(*dir_ + "/good.fmtsdf"));
-    map_->save(*dir_ + "/good3.fmtsdf");
+    MapSaveOptions three;
+    three.format_version = 3;
+    map_->save(*dir_ + "/good3.fmtsdf", three);
     good3_ = new std::string(readBytes(*dir_ + "/good3.fmtsdf"));
+    map_->save(*dir_ + "/good4.fmtsdf");
+    good4_ = new std::string(readBytes(*dir_ + "/good4.fmtsdf"));
   }
   static void TearDownTestSuite() {
     fs::remove_all(*dir_);
@@ -168,6 +186,7 @@ class MapFile : public ::testing::Test {
     delete snap_;
     delete good_;
     delete good3_;
+    delete good4_;
     delete dir_;
   }
   // A live map loaded from the good file: a bad file must leave it as it is.
@@ -198,6 +217,7 @@ class MapFile : public ::testing::Test {
   static Snapshot* snap_;
   static std::string* good_;   // version 2
   static std::string* good3_;  // version 3
+  static std::string* good4_;  // version 4 (the default)
   std::unique_ptr<TsdfMap> live_;
 };
 std::string* MapFile::dir_ = nullptr;
@@ -205,6 +225,7 @@ TsdfMap* MapFile::map_ = nullptr;
 Snapshot* MapFile::snap_ = nullptr;
 std::string* MapFile::good_ = nullptr;
 std::string* MapFile::good3_ = nullptr;
+std::string* MapFile::good4_ = nullptr;
 
 TEST_F(MapFile, LayoutAndRoundTrip) {
   ASSERT_GT(map_->numSwappedBlocks(), 0u);  // both stores are saved
@@ -313,9 +334,9 @@ TEST_F(MapFile, TruncatedAndExtendedFilesAreRejected) {
   expectRejected(*good_ + std::string(100, '\0'), {"bytes appended"});
   expectRejected("not a map", {"bad header"});
   std::string b = *good_;
-  put<uint32_t>(&b, 8, 4);
+  put<uint32_t>(&b, 8, 5);
   fixHeaderCrc(&b);
-  expectRejected(b, {"unknown version 4"});
+  expectRejected(b, {"unknown version 5"});
 }
 
 TEST_F(MapFile, DirectoriesAndMissingFilesAreRejected) {
@@ -392,7 +413,7 @@ void fixRecordCrc(std::string* r) { put<uint32_t>(r, r->size() - 4, crc32(r->dat
 
 // The record's zlib stream inflated (the mask and the packed voxels).
 std::string inflated(const std::string& record) {
-  std::string raw(64 + 4096, '\0');
+  std::string raw(64 + 4096 + 512, '\0');
   uLongf n = raw.size();
   const int rc = uncompress(reinterpret_cast<Bytef*>(&raw[0]), &n,
                             reinterpret_cast<const Bytef*>(record.data() + kHeadV3), get<uint32_t>(record, 12));
@@ -481,14 +502,62 @@ TEST_F(MapFile, VersionThreeLayoutAndRoundTrip) {
   EXPECT_LT(b.size() * 5, good_->size());
 }
 
+TEST_F(MapFile, VersionFourLayoutCarriesTheIntensities) {
+  const std::string& b = *good4_;
+  EXPECT_EQ(get<uint32_t>(b, 8), 4u);
+  EXPECT_EQ(get<uint32_t>(b, 40), crc32(b.data(), 40));
+  const std::vector<std::string> records = recordsV3(b);
+  ASSERT_EQ(records.size(), numBlocks());
+  size_t total = kHeader, with_grey = 0, stored = 0;
+  for (const auto& r : records) {
+    total += r.size();
+    ASSERT_EQ(get<uint32_t>(r, r.size() - 4), crc32(r.data(), r.size() - 4));
+    // Mask, tsdf plane, weight plane, then one intensity byte per stored voxel.
+    const std::string raw = inflated(r);
+    const VoxelBlock& truth = snap_->at({get<int32_t>(r, 0), get<int32_t>(r, 4), get<int32_t>(r, 8)});
+    std::vector<int> observed;
+    for (int v = 0; v < 512; ++v) {
+      const bool kept = truth.voxels[v].weight > 0 || truth.grey[v] != 0;
+      ASSERT_EQ((raw[v / 8] >> (v % 8)) & 1, kept ? 1 : 0) << "voxel " << v;
+      if (kept) observed.push_back(v);
+    }
+    const size_t n = observed.size();
+    ASSERT_EQ(raw.size(), 64 + 9 * n);
+    for (size_t s = 0; s < n; ++s) {
+      ASSERT_EQ(planeValue(raw, 64, n, s), truth.voxels[observed[s]].tsdf);
+      ASSERT_EQ(planeValue(raw, 64 + 4 * n, n, s), truth.voxels[observed[s]].weight);
+      ASSERT_EQ(static_cast<uint8_t>(raw[64 + 8 * n + s]), truth.grey[observed[s]]);
+      with_grey += truth.grey[observed[s]] != 0;
+    }
+    stored += n;
+  }
+  EXPECT_EQ(total, b.size());
+  // The drive fused images: most stored voxels near the surfaces have an intensity.
+  EXPECT_GT(with_grey, stored / 10);
+  TsdfMap back(smallLocalMap());
+  back.load(*dir_ + "/good4.fmtsdf");
+  EXPECT_TRUE(sameAs(back, *snap_, /*with_grey=*/true));
+  // A version-3 file (no intensity channel) loads with every intensity 0 (none).
+  TsdfMap old(smallLocalMap());
+  old.load(*dir_ + "/good3.fmtsdf");
+  EXPECT_TRUE(sameAs(old, *snap_));
+  size_t nonzero = 0;
+  for (const BlockIndex& bi : old.allBlocks()) {
+    for (unsigned char g : old.block(bi)->grey) nonzero += g != 0;
+  }
+  EXPECT_EQ(nonzero, 0u);
+  std::printf("version 3 %zu bytes, version 4 (intensities) %zu bytes (+%.1f %%)\n", good3_->size(), b.size(),
+              100.0 * (static_cast<double>(b.size()) / good3_->size() - 1.0));
+}
+
 TEST_F(MapFile, VersionTwoFilesStillLoadAndCanBeWritten) {
   EXPECT_EQ(TsdfMap::readHeader(*dir_ + "/good.fmtsdf").version, 2u);
   TsdfMap m(smallLocalMap());
   m.load(*dir_ + "/good.fmtsdf");
   EXPECT_TRUE(sameAs(m, *snap_));
-  // Saved again by default: version 3, the same map.
+  // Saved again by default: version 4, the same map.
   m.save(*dir_ + "/resaved.fmtsdf");
-  EXPECT_EQ(TsdfMap::readHeader(*dir_ + "/resaved.fmtsdf").version, 3u);
+  EXPECT_EQ(TsdfMap::readHeader(*dir_ + "/resaved.fmtsdf").version, 4u);
   TsdfMap again(smallLocalMap());
   again.load(*dir_ + "/resaved.fmtsdf");
   EXPECT_TRUE(sameAs(again, *snap_));
@@ -745,7 +814,7 @@ TEST_F(SwapFault, DamagedSwapFileLosesThatBlockOnly) {
   const std::string path = dir + "/swap/block_" + std::to_string(victim.x()) + "_" + std::to_string(victim.y()) + "_" +
                            std::to_string(victim.z()) + ".bin";
   std::string bytes = readBytes(path);
-  ASSERT_EQ(bytes.size(), 4100u);  // voxels + CRC-32
+  ASSERT_EQ(bytes.size(), 4612u);  // voxels + intensities + CRC-32
   bytes[1000] ^= 0x01;
   writeBytes(path, bytes);
   EXPECT_EQ(map->block(victim), nullptr);

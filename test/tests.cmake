@@ -38,6 +38,7 @@ fm_add_test(test_dynamic_objects_node ROSTEST test/launch/dynamic_objects.test
 
 # --- TSDF fusion and maps --------------------------------------------------
 fm_add_test(test_tsdf SOURCES test/test_tsdf.cpp)
+fm_add_test(test_occupancy_grid SOURCES test/test_occupancy_grid.cpp)
 fm_add_test(test_tsdf_map_file SOURCES test/test_tsdf_map_file.cpp DEPENDS map_tool)
 fm_add_test(test_map_session SOURCES test/test_map_session.cpp)
 fm_add_test(test_map_accuracy SOURCES test/test_map_accuracy.cpp DEPENDS map_accuracy)

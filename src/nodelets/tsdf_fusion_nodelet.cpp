@@ -7,12 +7,20 @@
 //             camera model of each depth image (the latest CameraInfo of its
 //             frame_id; a frame before one is dropped, "no camera_info yet").
 //             ~rig_source camchain (default): the model from ~camchain/~mount.
+//             image (sensor_msgs/Image, the reference camera; vehicle.launch
+//             remaps it; ~intensity false: not subscribed): its grey at the
+//             depth frame's stamp is fused into the voxels (the mesh's
+//             intensity colour); a depth frame without one fuses without.
 //             depth_masked/vehicles (TrackedVehicleArray, optional): the
 //             regions of parked vehicles that drove off (carve_min/max), carved
 //             free in the depth maps fused within 2 s after it (no ghost).
 // Publishes   tsdf/mesh  (visualization_msgs/MarkerArray: one TRIANGLE_LIST per map
 //                    block, only blocks changed since the last publish)
-//             tsdf/cloud (sensor_msgs/PointCloud2: surface points, world frame)
+//             tsdf/cloud (sensor_msgs/PointCloud2: surface points, world frame,
+//                    fields x y z intensity (the voxels' grey; 0 = none))
+//             tsdf/occupancy (nav_msgs/OccupancyGrid, world frame, latched:
+//                    the ground-aware obstacle grid around base_frame every
+//                    ~occupancy_period s; core/tsdf/occupancy_grid.h)
 //             /diagnostics (StageMonitor "tsdf": rates, integration time, drops
 //                    by reason, tf failures; frames, errors caught, lost swap
 //                    blocks, saves, block counts)
@@ -29,6 +37,7 @@
 // and its previous version is kept as <path>.1; ~reload_map_on_start resumes
 // from it; a depth stamp far older than the last one (bag replayed, clock
 // reset) resets the time state and keeps the map (or clears it on request).
+#include <array>
 #include <atomic>
 #include <cmath>
 #include <cstdio>
@@ -38,7 +47,11 @@
 #include <mutex>
 
 #include <dynamic_reconfigure/server.h>
+#include <deque>
+
+#include <image_transport/image_transport.h>
 #include <message_filters/subscriber.h>
+#include <nav_msgs/OccupancyGrid.h>
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <sensor_msgs/Image.h>
@@ -53,6 +66,7 @@
 #include "fisheye_mapping/FilePath.h"
 #include "fisheye_mapping/FrameDone.h"
 #include "fisheye_mapping/TsdfFusionConfig.h"
+#include "fisheye_mapping/core/tsdf/occupancy_grid.h"
 #include "fisheye_mapping/core/tsdf/tsdf_map.h"
 #include "fisheye_mapping/core/tsdf/tsdf_mesher.h"
 #include "fisheye_mapping/ros/camera_info.h"
@@ -75,6 +89,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
   ~TsdfFusionNodelet() override {
     autosave_timer_.stop();
     timer_.stop();
+    occupancy_timer_.stop();
     {
       std::lock_guard<std::mutex> lock(mutex_);
       if (map_ && session_) session_->shutdown(*map_);
@@ -132,7 +147,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
       }
     });
     mesher_ = std::make_unique<TsdfMesher>(cfg.min_observations);
-    mesh_markers_ = std::make_unique<MeshMarkerStream>(world_frame_);
+    mesh_markers_ = std::make_unique<MeshMarkerStream>(world_frame_, cfg.colour);
     if (session_->start(*map_, reload_on_start_)) {
       mesher_->clear();
       cloud_stale_ = true;
@@ -146,6 +161,10 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
       info_sub_ = nh.subscribe("depth_masked/camera_info", 10, &TsdfFusionNodelet::onCameraInfo, this);
     }
     vehicles_sub_ = nh.subscribe("depth_masked/vehicles", 5, &TsdfFusionNodelet::onVehicles, this);
+    if (opts_.intensity) {
+      it_ = std::make_unique<image_transport::ImageTransport>(nh);
+      image_sub_ = it_->subscribe("image", 4, &TsdfFusionNodelet::onImage, this);
+    }
     depth_sub_.subscribe(nh, "depth_masked/image", queue_size);
     depth_sub_.registerCallback([this](const sensor_msgs::ImageConstPtr&) { monitor_->input(); });
     tf_filter_ = std::make_unique<tf2_ros::MessageFilter<sensor_msgs::Image>>(depth_sub_, *tf_buffer_, world_frame_,
@@ -175,6 +194,12 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
           guarded(timer_errors_, "mesh subscriber connect", [&] { onMeshSubscriber(pub); });
         });
     cloud_pub_ = nh.advertise<sensor_msgs::PointCloud2>("tsdf/cloud", 2, true);
+    occupancy_pub_ = nh.advertise<nav_msgs::OccupancyGrid>("tsdf/occupancy", 1, true);
+    if (opts_.occupancy_period > 0) {
+      occupancy_timer_ = nh.createWallTimer(ros::WallDuration(opts_.occupancy_period), [this](const ros::WallTimerEvent&) {
+        guarded(timer_errors_, "occupancy timer", [this] { publishOccupancy(); });
+      });
+    }
     // One FrameDone per depth frame finished with (fused or skipped): the
     // paced bag player waits for it.
     done_pub_ = nh.advertise<fisheye_mapping::FrameDone>("tsdf/fusion_done", 100);
@@ -347,6 +372,11 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     stat.add("failed saves", session_->savesFailed());
     stat.add("max_range (m)", live_.max_range);
     stat.add("min_observations", live_.min_observations);
+    stat.add("frames fused with intensity", frames_with_intensity_);
+    stat.add("intensity images unreadable", static_cast<size_t>(image_errors_));
+    stat.add("occupancy cells occupied / free / unknown",
+             std::to_string(occupancy_cells_[0]) + " / " + std::to_string(occupancy_cells_[1]) + " / " +
+                 std::to_string(occupancy_cells_[2]));
     if (const std::string e = session_->lastError(); !e.empty()) stat.add("last save error", e);
   }
 
@@ -438,7 +468,12 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     std::lock_guard<std::mutex> lock(mutex_);
     try {
       const double t0 = StageStats::now();
-      const auto stats = map_->integrate(depth, *model, T_W_C, T_W_B.translation(), carveFor(msg->header.stamp));
+      const cv::Mat grey = greyFor(*msg, *model);
+      const auto stats =
+          map_->integrate(depth, *model, T_W_C, T_W_B.translation(), carveFor(msg->header.stamp), grey);
+      if (!grey.empty()) ++frames_with_intensity_;
+      last_T_W_B_ = T_W_B;
+      have_pose_ = true;
       monitor_->processed(StageStats::now() - t0);
       monitor_->output();  // the stage's product: a frame in the map
       last_stamp_ = msg->header.stamp;
@@ -456,6 +491,61 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
       monitor_->dropped("rejected by the map");
       NODELET_WARN_THROTTLE(5.0, "depth frame at %.3f skipped: %s", msg->header.stamp.toSec(), e.what());
     }
+  }
+
+  // The reference camera's images, kept a few frames for the depth frames of
+  // their stamps (the depth stage is slower than the camera).
+  void onImage(const sensor_msgs::ImageConstPtr& msg) {
+    try {
+      const cv::Mat grey = toCvImageShare(msg, ImageTarget::kGrey8, getNodeHandle().resolveName("image"));
+      std::lock_guard<std::mutex> lock(image_mutex_);
+      images_.push_back({msg->header.stamp, msg->header.frame_id, grey});
+      while (images_.size() > 8) images_.pop_front();
+    } catch (const std::exception& e) {
+      ++image_errors_;
+      NODELET_WARN_THROTTLE(5.0, "intensity image skipped (the map is fused without its grey): %s", e.what());
+    }
+  }
+
+  // The grey image of the depth frame's stamp (within 1 ms) and camera, the
+  // camera's size; empty when there is none (the frame fuses without intensity).
+  cv::Mat greyFor(const sensor_msgs::Image& depth, const CameraModel& model) {
+    std::lock_guard<std::mutex> lock(image_mutex_);
+    for (auto it = images_.rbegin(); it != images_.rend(); ++it) {
+      if (std::abs((it->stamp - depth.header.stamp).toSec()) > 1e-3) continue;
+      if (it->grey.cols != model.width() || it->grey.rows != model.height()) {
+        NODELET_WARN_THROTTLE(5.0, "intensity image is %dx%d, the depth camera %dx%d: fused without intensity",
+                              it->grey.cols, it->grey.rows, model.width(), model.height());
+        return cv::Mat();
+      }
+      return it->grey;
+    }
+    return cv::Mat();
+  }
+
+  // The obstacle grid around the vehicle's last fused pose.
+  void publishOccupancy() {
+    nav_msgs::OccupancyGrid msg;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (!have_pose_ || occupancy_pub_.getNumSubscribers() == 0) return;
+      const OccupancyGrid grid =
+          computeOccupancyGrid(*map_, last_T_W_B_.translation(), opts_.occupancy, live_.min_observations);
+      msg.header.frame_id = world_frame_;
+      msg.header.stamp = last_stamp_;
+      msg.info.map_load_time = last_stamp_;
+      msg.info.resolution = static_cast<float>(grid.resolution);
+      msg.info.width = static_cast<uint32_t>(grid.width);
+      msg.info.height = static_cast<uint32_t>(grid.height);
+      msg.info.origin.position.x = grid.origin.x();
+      msg.info.origin.position.y = grid.origin.y();
+      // The grid lies at the vehicle's ground (its base), for rviz.
+      msg.info.origin.position.z = last_T_W_B_.translation().z();
+      msg.info.origin.orientation.w = 1.0;
+      msg.data.assign(grid.cells.begin(), grid.cells.end());
+      occupancy_cells_ = {grid.occupied, grid.free, grid.unknown};
+    }
+    occupancy_pub_.publish(msg);
   }
 
   // The camera model of depth images in `frame`: the camchain camera of that
@@ -562,7 +652,9 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
   bool saveMesh(fisheye_mapping::FilePath::Request& req, fisheye_mapping::FilePath::Response& res) {
     return run(res, req.path, "save mesh to", [this](const std::string& p) {
       mesh_markers_->markChanged(mesher_->update(*map_));
-      mesher_->saveMeshPly(p);
+      MeshExportOptions options;
+      options.coloring = live_.colour;
+      mesher_->saveMeshPly(p, options);
     });
   }
   bool saveCloud(fisheye_mapping::FilePath::Request& req, fisheye_mapping::FilePath::Response& res) {
@@ -646,7 +738,22 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
   std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
   message_filters::Subscriber<sensor_msgs::Image> depth_sub_;
   std::unique_ptr<tf2_ros::MessageFilter<sensor_msgs::Image>> tf_filter_;
-  ros::Publisher mesh_pub_, cloud_pub_, done_pub_;
+  ros::Publisher mesh_pub_, cloud_pub_, done_pub_, occupancy_pub_;
+  ros::WallTimer occupancy_timer_;
+  std::unique_ptr<image_transport::ImageTransport> it_;
+  image_transport::Subscriber image_sub_;
+  struct StampedGrey {
+    ros::Time stamp;
+    std::string frame;
+    cv::Mat grey;
+  };
+  std::mutex image_mutex_;
+  std::deque<StampedGrey> images_;  // image_mutex_
+  std::atomic<size_t> image_errors_{0};
+  size_t frames_with_intensity_ = 0;  // mutex_
+  Eigen::Isometry3d last_T_W_B_ = Eigen::Isometry3d::Identity();  // mutex_
+  bool have_pose_ = false;
+  std::array<size_t, 3> occupancy_cells_{};  // of the last grid; mutex_
   std::vector<ros::ServiceServer> services_;
   ros::WallTimer timer_, autosave_timer_;
   std::unique_ptr<StageMonitor> monitor_;

@@ -201,16 +201,8 @@ StampedDetections fromDetectionArrayMsg(const Detection2DArray& msg) {
 
 // ---------------------------------------------------------------------------
 
-std_msgs::ColorRGBA meshVertexColour(float z) {
-  // Colour by height: 0 m dark grey-blue to 6 m light.
-  std_msgs::ColorRGBA c;
-  const float h = std::min(1.0f, std::max(0.0f, z / 6.0f));
-  c.r = 0.3f + 0.6f * h, c.g = 0.35f + 0.5f * h, c.b = 0.5f + 0.3f * h, c.a = 1.0f;
-  return c;
-}
-
 visualization_msgs::Marker meshBlockMarker(const BlockOutput* block, int id, const std::string& frame,
-                                           const ros::Time& stamp) {
+                                           const ros::Time& stamp, MeshColoring coloring) {
   visualization_msgs::Marker m;
   m.header.frame_id = frame;
   m.header.stamp = stamp;
@@ -225,13 +217,25 @@ visualization_msgs::Marker meshBlockMarker(const BlockOutput* block, int id, con
   m.type = visualization_msgs::Marker::TRIANGLE_LIST;
   m.action = visualization_msgs::Marker::ADD;
   m.color.a = 1.0;
-  m.points.reserve(block->triangles.size());
-  m.colors.reserve(block->triangles.size());
-  for (const auto& v : block->triangles) {
+  const auto& tri = block->triangles;
+  const bool has_grey = block->triangle_grey.size() == tri.size();
+  m.points.reserve(tri.size());
+  m.colors.reserve(tri.size());
+  for (size_t i = 0; i < tri.size(); ++i) {
+    const Eigen::Vector3f& v = tri[i];
     geometry_msgs::Point p;
     p.x = v.x(), p.y = v.y(), p.z = v.z();
     m.points.push_back(p);
-    m.colors.push_back(meshVertexColour(v.z()));
+    Eigen::Vector3f n = Eigen::Vector3f::UnitZ();
+    if (coloring == MeshColoring::kNormal) {
+      const size_t f = i - i % 3;
+      if (f + 2 < tri.size()) n = (tri[f + 1] - tri[f]).cross(tri[f + 2] - tri[f]).normalized();
+    }
+    const auto rgb = vertexColor(coloring, v, n, has_grey ? block->triangle_grey[i] : 0, kMarkerHeightMin,
+                                 kMarkerHeightMax);
+    std_msgs::ColorRGBA c;
+    c.r = rgb[0] / 255.0f, c.g = rgb[1] / 255.0f, c.b = rgb[2] / 255.0f, c.a = 1.0f;
+    m.colors.push_back(c);
   }
   return m;
 }
@@ -255,7 +259,7 @@ visualization_msgs::MarkerArray meshToMarkerArray(
   return markers;
 }
 
-sensor_msgs::PointCloud2 toCloudMsg(const pcl::PointCloud<pcl::PointXYZ>& cloud, const std::string& frame,
+sensor_msgs::PointCloud2 toCloudMsg(const pcl::PointCloud<pcl::PointXYZI>& cloud, const std::string& frame,
                                     const ros::Time& stamp) {
   sensor_msgs::PointCloud2 msg;
   pcl::toROSMsg(cloud, msg);

@@ -20,13 +20,16 @@ bool indexLess(const BlockIndex& a, const BlockIndex& b) {
 
 }  // namespace
 
-MeshMarkerStream::MeshMarkerStream(std::string frame) : frame_(std::move(frame)) {}
+MeshMarkerStream::MeshMarkerStream(std::string frame, MeshColoring coloring)
+    : frame_(std::move(frame)), coloring_(coloring) {}
 
 MeshMarkerStream::Fingerprint MeshMarkerStream::fingerprint(const BlockOutput& block) {
   static_assert(sizeof(Eigen::Vector3f) == 3 * sizeof(float), "vertices must be packed to be hashed as bytes");
   const std::string_view bytes(reinterpret_cast<const char*>(block.triangles.data()),
                                block.triangles.size() * sizeof(Eigen::Vector3f));
-  return Fingerprint{block.triangles.size(), std::hash<std::string_view>()(bytes)};
+  const std::string_view grey(reinterpret_cast<const char*>(block.triangle_grey.data()), block.triangle_grey.size());
+  return Fingerprint{block.triangles.size(),
+                     std::hash<std::string_view>()(bytes) * 31u + std::hash<std::string_view>()(grey)};
 }
 
 int MeshMarkerStream::idFor(const BlockIndex& block) {
@@ -62,7 +65,7 @@ bool MeshMarkerStream::blockUpdate(const MeshBlocks& blocks, const BlockIndex& b
   const Fingerprint now = fingerprint(it->second);
   if (on_screen != shown_.end() && on_screen->second == now) return false;  // recomputed, same triangles
   shown_[block] = now;
-  out = meshBlockMarker(&it->second, idFor(block), frame_, stamp);
+  out = meshBlockMarker(&it->second, idFor(block), frame_, stamp, coloring_);
   return true;
 }
 
@@ -108,7 +111,7 @@ visualization_msgs::MarkerArray MeshMarkerStream::republishAll(const MeshBlocks&
     const auto it = blocks.find(b);
     // Only with changes pending (update() not called first) can a shown block be gone.
     if (it == blocks.end() || it->second.triangles.empty()) continue;
-    markers.markers.push_back(meshBlockMarker(&it->second, ids_.at(b), frame_, stamp));
+    markers.markers.push_back(meshBlockMarker(&it->second, ids_.at(b), frame_, stamp, coloring_));
   }
   return markers;
 }

@@ -133,6 +133,12 @@ const ParamTable<TsdfNodeOptions>& TsdfNodeOptions::params() {
                 "Time between saves to save_map_on_shutdown while the map changes; 0: off")
         .flag("clear_map_on_time_reset", [](C& c) -> bool& { return c.clear_map_on_time_reset; },
               "A time reset clears the map (else it is kept)")
+        .flag("intensity", [](C& c) -> bool& { return c.intensity; },
+              "Subscribe `image` (the reference camera's images, remapped in vehicle.launch) and fuse their grey "
+              "into the voxels (the mesh's intensity colour); false: no image traffic, no intensity")
+        .number("occupancy_period", [](C& c) -> double& { return c.occupancy_period; }, R::atLeast(0), "s",
+                "Time between tsdf/occupancy grids (nav_msgs/OccupancyGrid around the vehicle); 0: none")
+        .include(OccupancyGridConfig::params(), [](C& c) -> OccupancyGridConfig& { return c.occupancy; })
         .include(TimeResetOptions::params(), [](C& c) -> TimeResetOptions& { return c.time_reset; })
         .include(DiagnosticOptions::params(), [](C& c) -> DiagnosticOptions& { return c.diagnostics; });
     return t;

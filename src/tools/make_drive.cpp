@@ -4,7 +4,9 @@
 //   make_drive --out DIR --camchain C --mount M [options]
 //
 // Writes DIR/drive.bag, DIR/camchain.yaml + DIR/mount.yaml (the rig, as read
-// back by the calibration loader) and DIR/static_scene.ply (the static world).
+// back by the calibration loader), DIR/static_scene.ply (the static world) and
+// DIR/world.yaml (the WorldConfig and duration: what occupancy_eval rebuilds
+// the world's ground truth from).
 // Options make a drive as hard as a real rig's (calibration error, camera
 // response differences, noise, blur, fine texture): see the usage text.
 // Bag topics: /camN/image_raw (mono8), /camN/depth_gt (32FC1 range along the
@@ -364,6 +366,15 @@ int main(int argc, char** argv) {
       if (!k) throw std::runtime_error("cannot write " + opt.out + "/knock.yaml");
     }
     world.saveStaticMeshPly(opt.out + "/static_scene.ply");
+    {
+      std::ofstream w(opt.out + "/world.yaml");
+      w << "# make_drive: the synthetic world of this drive (fisheye_mapping::synth::WorldConfig)\n"
+        << "preset: " << wc.preset << "\nseed: " << wc.seed << "\nspeed: " << wc.speed
+        << "\nmoving_vehicles: " << wc.moving_vehicles << "\nroute_length: " << wc.route_length
+        << "\nasphalt_grain: " << wc.asphalt_grain << "\nclouds: " << wc.clouds << "\nduration: " << opt.duration
+        << "\n";
+      if (!w) throw std::runtime_error("cannot write " + opt.out + "/world.yaml");
+    }
 
     const std::string bag_path = opt.out + "/drive.bag";
     rosbag::Bag bag;

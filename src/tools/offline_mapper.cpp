@@ -166,6 +166,9 @@ struct BagImage {
   cv::Mat sweepImage(const std::string& source) const {
     return raw ? fm::toCvImageShare(raw, fm::ImageTarget::kSweep, source) : fm::toGrey(*compressed, source);
   }
+  cv::Mat greyImage(const std::string& source) const {  // mono8
+    return raw ? fm::toCvImageShare(raw, fm::ImageTarget::kGrey8, source) : fm::toGrey(*compressed, source);
+  }
 };
 
 // --topic CAM=TOPIC, checked: both parts present.
@@ -337,18 +340,18 @@ int main(int argc, char** argv) {
     std::vector<std::string> topics = camera_topics;
     std::map<std::string, int> cam_of;
     for (size_t c = 0; c < topics.size(); ++c) cam_of[topics[c]] = int(c);
-    if (depth_src == "gt") {  // ground-truth depth stands in for the whole frame set
-      topics = {gt_depth_topic};
-      cam_of = {{gt_depth_topic, 0}};
+    if (depth_src == "gt") {  // ground-truth depth stands in for the sweep; the reference image gives the intensity
+      topics = {gt_depth_topic, camera_topics[ref]};
+      cam_of = {{gt_depth_topic, 0}, {camera_topics[ref], 1}};
     }
     rosbag::View images(bag, rosbag::TopicQuery(topics));
     if (images.size() == 0) throw std::runtime_error(bag_path + " has none of the topics " + topics[0] + " ...");
-    size_t total_sets = images.size() / (depth_src == "gt" ? 1 : rig.cameras.size()) / every;
+    size_t total_sets = images.size() / (depth_src == "gt" ? 2 : rig.cameras.size()) / every;
     if (max_frames > 0) total_sets = std::min<size_t>(total_sets, max_frames);
-    // Ground-truth depth is one stream: nothing to group.
-    const bool one_stream = depth_src == "gt";
-    fm::FrameSetSync<BagImage> sync(one_stream ? 1 : int(rig.cameras.size()),
-                                    one_stream ? fm::SyncPolicy::Exact : sync_cfg.policy, sync_cfg.max_interval,
+    // Ground-truth depth and the reference image: rendered together, exact stamps.
+    const bool gt_depth = depth_src == "gt";
+    fm::FrameSetSync<BagImage> sync(gt_depth ? 2 : int(rig.cameras.size()),
+                                    gt_depth ? fm::SyncPolicy::Exact : sync_cfg.policy, sync_cfg.max_interval,
                                     std::size_t(sync_cfg.queue_size), sync_cfg.time_reset_threshold);
     const int ref_slot = depth_src == "gt" ? 0 : ref;
     // timings.csv is written under a temporary name and renamed at the end.
@@ -466,7 +469,9 @@ int main(int argc, char** argv) {
         ++submitted;
         if (depth_src == "gt") {
           if (!set[0].raw) throw std::runtime_error(gt_depth_topic + " must hold sensor_msgs/Image (32FC1)");
-          handle(mapper.processDepth(fm::toDepth(*set[0].raw, gt_depth_topic), T_W_B, boxes), stamp);
+          handle(mapper.processDepth(fm::toDepth(*set[0].raw, gt_depth_topic), T_W_B, boxes,
+                                     set[1].greyImage(rig.cameras[ref].name)),
+                 stamp);
         } else {
           // Pipelined: this set's depth while the previous one is masked and
           // fused (and this one's detection runs); its result comes back with
@@ -529,7 +534,7 @@ int main(int argc, char** argv) {
                   "%lu incomplete sets dropped, %zu without a pose, %zu without ground-truth boxes; "
                   "sync %s; sweep backend %s; map: %zu triangles, %zu cloud points.\n",
                   processed, wall, processed / wall, (unsigned long)s.dropped_incomplete, skipped_pose, no_boxes,
-                  syncText(one_stream ? fm::SyncPolicy::Exact : sync_cfg.policy, sync_cfg.max_interval).c_str(),
+                  syncText(gt_depth ? fm::SyncPolicy::Exact : sync_cfg.policy, sync_cfg.max_interval).c_str(),
                   mapper.depthStage().backendName().c_str(), mesher.numTriangles(), mesher.surfaceCloud().size());
     md << buf;
     if (const fm::OnlineRigCalibrator* cal = mapper.depthStage().selfCalibration()) {

@@ -144,13 +144,14 @@ StampedDetections fromDetectionArrayMsg(const Detection2DArray& msg);
 extern const char* const kMeshMarkerNamespace;  // "tsdf_mesh"
 
 /// One mesh block as a TRIANGLE_LIST marker (namespace tsdf_mesh, `id`,
-/// identity pose, scale 1, one colour per vertex by height: 0 m dark
-/// grey-blue to 6 m light); a DELETE marker for `id` when the block is null or
-/// has no triangles.
+/// identity pose, scale 1, one colour per vertex: vertexColor() of
+/// `coloring`, with the face's normal and the height ramp over 0..6 m); a
+/// DELETE marker for `id` when the block is null or has no triangles.
 visualization_msgs::Marker meshBlockMarker(const BlockOutput* block, int id, const std::string& frame,
-                                           const ros::Time& stamp);
-/// The colour of a mesh vertex at height `z` (metres).
-std_msgs::ColorRGBA meshVertexColour(float z);
+                                           const ros::Time& stamp,
+                                           MeshColoring coloring = MeshColoring::kIntensity);
+/// The height ramp's range of the markers (metres, world z).
+constexpr double kMarkerHeightMin = 0.0, kMarkerHeightMax = 6.0;
 /// A DELETEALL marker in `frame`.
 visualization_msgs::Marker deleteAllMarker(const std::string& frame);
 
@@ -160,8 +161,8 @@ visualization_msgs::MarkerArray meshToMarkerArray(
     const std::unordered_map<BlockIndex, BlockOutput, BlockIndexHash>& blocks, const std::string& frame,
     const ros::Time& stamp, const std::function<int(const BlockIndex&)>& marker_id);
 
-/// A cloud as a PointCloud2 in `frame` at `stamp`.
-sensor_msgs::PointCloud2 toCloudMsg(const pcl::PointCloud<pcl::PointXYZ>& cloud, const std::string& frame,
+/// A cloud as a PointCloud2 in `frame` at `stamp` (fields x y z intensity).
+sensor_msgs::PointCloud2 toCloudMsg(const pcl::PointCloud<pcl::PointXYZI>& cloud, const std::string& frame,
                                     const ros::Time& stamp);
 
 // ---------------------------------------------------------------------------

@@ -15,7 +15,7 @@
 //
 // The mesher (TsdfMesher::update) reports every block it recomputed, most of
 // them unchanged or empty and never shown; the triangles sent for each shown
-// block are remembered as a fingerprint (count and a hash of the vertices), so
+// block are remembered as a fingerprint (count and a hash of the vertices and their intensities), so
 // those cost nothing on the wire.
 //
 // Not thread-safe (the nodelet calls it under its lock).
@@ -39,8 +39,9 @@ using MeshBlocks = std::unordered_map<BlockIndex, BlockOutput, BlockIndexHash>;
 
 class MeshMarkerStream {
  public:
-  /// Markers in `frame` (the map's world frame).
-  explicit MeshMarkerStream(std::string frame);
+  /// Markers in `frame` (the map's world frame), coloured by `coloring`.
+  explicit MeshMarkerStream(std::string frame, MeshColoring coloring = MeshColoring::kIntensity);
+  MeshColoring coloring() const { return coloring_; }
 
   /// Notes blocks whose mesh may have changed (what TsdfMesher::update or
   /// rebuild returned), to be looked at by the next update(). Call it for
@@ -85,6 +86,7 @@ class MeshMarkerStream {
                    visualization_msgs::Marker& out);
 
   std::string frame_;
+  MeshColoring coloring_;
   std::unordered_map<BlockIndex, int, BlockIndexHash> ids_;  // kept while the block is off screen too
   std::unordered_map<BlockIndex, Fingerprint, BlockIndexHash> shown_;  // what rviz has now
   BlockSet pending_;

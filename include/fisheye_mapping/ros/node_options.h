@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "fisheye_mapping/core/common/param_table.h"
+#include "fisheye_mapping/core/tsdf/occupancy_grid.h"
 
 namespace fisheye_mapping {
 
@@ -91,6 +92,9 @@ struct TsdfNodeOptions {
   bool reload_map_on_start = false;
   double autosave_period = 0.0;  // s; 0: off
   bool clear_map_on_time_reset = false;
+  bool intensity = true;  // subscribe `image` (the reference camera) for the map's intensity
+  OccupancyGridConfig occupancy;
+  double occupancy_period = 1.0;  // s between tsdf/occupancy grids; 0: none
   TimeResetOptions time_reset;
   DiagnosticOptions diagnostics;
   static const ParamTable<TsdfNodeOptions>& params();

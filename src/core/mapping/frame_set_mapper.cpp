@@ -61,14 +61,15 @@ FrameSetResult FrameSetMapper::process(const std::vector<cv::Mat>& images, const
   FrameSetResult r = depthOf(images);
   double detect_ms = 0;
   const ImageBoxes use = boxesFor(images[depth_.reference()], boxes, &detect_ms);
-  r = maskAndFuse(std::move(r), use, T_W_B, depth_.rig().cameras[depth_.reference()], stamp_s);
+  r = maskAndFuse(std::move(r), use, T_W_B, depth_.rig().cameras[depth_.reference()], stamp_s,
+                  images[depth_.reference()]);
   r.ms.detect_ms = detect_ms;
   r.ms.total_ms = msSince(t0);
   return r;
 }
 
 FrameSetResult FrameSetMapper::processDepth(cv::Mat depth, const Eigen::Isometry3d& T_W_B,
-                                            const std::optional<ImageBoxes>& boxes) {
+                                            const std::optional<ImageBoxes>& boxes, const cv::Mat& grey) {
   if (detector_) throw std::invalid_argument("a given depth map has no image for the detector; give boxes instead");
   flush();
   const auto t0 = Clock::now();
@@ -77,7 +78,7 @@ FrameSetResult FrameSetMapper::processDepth(cv::Mat depth, const Eigen::Isometry
   r.ms.depth_ms = msSince(t0);
   double detect_ms = 0;
   r = maskAndFuse(std::move(r), boxesFor(cv::Mat(), boxes, &detect_ms), T_W_B,
-                  depth_.rig().cameras[depth_.reference()], std::numeric_limits<double>::quiet_NaN());
+                  depth_.rig().cameras[depth_.reference()], std::numeric_limits<double>::quiet_NaN(), grey);
   r.ms.total_ms = msSince(t0);
   return r;
 }
@@ -113,9 +114,9 @@ std::optional<FrameSetResult> FrameSetMapper::submit(const std::vector<cv::Mat>&
   // change the rig while this one fuses).
   const RigCamera ref = depth_.rig().cameras[depth_.reference()];
   pending_ = std::async(std::launch::async,
-                        [this, r = std::move(r), detection, timed_boxes, T_W_B, t0, ref, stamp_s]() mutable {
+                        [this, r = std::move(r), detection, timed_boxes, T_W_B, t0, ref, stamp_s, reference]() mutable {
     const ImageBoxes use = detection.get();
-    FrameSetResult out = maskAndFuse(std::move(r), use, T_W_B, ref, stamp_s);
+    FrameSetResult out = maskAndFuse(std::move(r), use, T_W_B, ref, stamp_s, reference);
     out.ms.detect_ms = *timed_boxes;
     out.ms.total_ms = msSince(t0);
     return out;
@@ -144,7 +145,7 @@ ImageBoxes FrameSetMapper::boxesFor(const cv::Mat& reference_image, const std::o
 }
 
 FrameSetResult FrameSetMapper::maskAndFuse(FrameSetResult r, const ImageBoxes& use, const Eigen::Isometry3d& T_W_B,
-                                           const RigCamera& ref, double stamp_s) {
+                                           const RigCamera& ref, double stamp_s, const cv::Mat& image) {
   const auto tm = Clock::now();
   cv::Mat& depth = r.depth.depth;
   const int bw = use.image_width > 0 ? use.image_width : depth.cols;
@@ -169,7 +170,10 @@ FrameSetResult FrameSetMapper::maskAndFuse(FrameSetResult r, const ImageBoxes& u
   const auto tf = Clock::now();
   // Parked vehicles that drove off: their regions are carved free.
   const std::vector<Eigen::AlignedBox3d> carve = tracked ? motion_.ghostRegions() : std::vector<Eigen::AlignedBox3d>();
-  r.fusion = map_->integrate(depth, ref.model, T_W_B * ref.T_base_cam, T_W_B.translation(), carve);
+  // The intensity of the map: the reference image, when it is one grey image of the camera's size.
+  const bool grey = image.type() == CV_8UC1 && image.cols == ref.model.width() && image.rows == ref.model.height();
+  r.fusion = map_->integrate(depth, ref.model, T_W_B * ref.T_base_cam, T_W_B.translation(), carve,
+                             grey ? image : cv::Mat());
   if (++frame_sets_ % size_t(config_.mesh_every) == 0) mesher_.update(*map_);
   r.ms.fuse_ms = msSince(tf);
   return r;

@@ -414,6 +414,42 @@ std::vector<Eigen::Isometry3d> World::vehiclePoses(double time) const {
   return poses;
 }
 
+int8_t World::occupancyAt(double x, double y, double obstacle_height, double vehicle_height) const {
+  // Solids the column's sample points lie in (a ray cast from inside a box
+  // would not see it), from the grid cell's list.
+  const int ix = static_cast<int>(std::floor((x - grid_min_.x()) / cell_));
+  const int iy = static_cast<int>(std::floor((y - grid_min_.y()) / cell_));
+  const double lo = obstacle_height + 1e-3, hi = vehicle_height;
+  if (ix >= 0 && iy >= 0 && ix < grid_w_ && iy < grid_h_) {
+    for (int id : cells_[static_cast<size_t>(iy) * grid_w_ + ix]) {
+      if (id >= static_cast<int>(boxes_.size())) {
+        const int vid = numVehicles() + id - static_cast<int>(boxes_.size());
+        const VehicleDims& dims = models_[vid].dims();
+        const Eigen::Vector3d q = parked_poses_[vid - numVehicles()].inverse() * Eigen::Vector3d(x, y, 0.5 * (lo + hi));
+        if (std::abs(q.x()) <= 0.5 * dims.length && std::abs(q.y()) <= 0.5 * dims.width &&
+            obstacle_height < dims.height) {
+          return 100;
+        }
+      } else if (id >= 0) {
+        const Box& b = boxes_[id];
+        if (x >= b.lo.x() && x <= b.hi.x() && y >= b.lo.y() && y <= b.hi.y() && b.hi.z() > lo && b.lo.z() < hi) {
+          return 100;
+        }
+      } else {
+        const Sphere& sp = spheres_[~id];
+        const double r2 = sp.r * sp.r - (x - sp.c.x()) * (x - sp.c.x()) - (y - sp.c.y()) * (y - sp.c.y());
+        if (r2 >= 0 && sp.c.z() + std::sqrt(r2) > lo && sp.c.z() - std::sqrt(r2) < hi) return 100;
+      }
+    }
+  }
+  // Then the first surface under vehicle_height: the ground, or a low solid
+  // (a kerb) under obstacle_height.
+  const Hit down = cast(Eigen::Vector3d(x, y, hi), -Eigen::Vector3d::UnitZ(), std::vector<Eigen::Isometry3d>(),
+                        hi + 1.0);
+  if (!(down.t < hi + 1.0)) return -1;
+  return hi - down.t > obstacle_height ? 100 : 0;
+}
+
 Hit World::cast(const Eigen::Vector3d& o, const Eigen::Vector3d& d, double time, double max_range) const {
   return cast(o, d, vehiclePoses(time), max_range);
 }

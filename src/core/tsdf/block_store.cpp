@@ -54,7 +54,7 @@ std::string BlockStore::swapPath(const BlockIndex& b) const {
   return name.str();
 }
 
-// Swap file: the block's voxels, then the CRC32 of those bytes.
+// Swap file: the block's voxels, its intensities, then the CRC32 of those bytes.
 void BlockStore::swapOut(const BlockIndex& index) {
   auto it = active_.find(index);
   if (it == active_.end()) return;
@@ -62,11 +62,13 @@ void BlockStore::swapOut(const BlockIndex& index) {
   active_.erase(it);
   if (!config_.swap_directory.empty()) {
     const std::string path = swapPath(index);
-    const uint32_t crc = crc32(block->voxels.data(), sizeof(block->voxels));
+    const uint32_t crc =
+        crc32(block->grey.data(), sizeof(block->grey), crc32(block->voxels.data(), sizeof(block->voxels)));
     bool ok = false;
     {
       std::ofstream f(path, std::ios::binary | std::ios::trunc);
       f.write(reinterpret_cast<const char*>(block->voxels.data()), sizeof(block->voxels));
+      f.write(reinterpret_cast<const char*>(block->grey.data()), sizeof(block->grey));
       f.write(reinterpret_cast<const char*>(&crc), sizeof(crc));
       f.close();
       ok = static_cast<bool>(f);
@@ -96,6 +98,7 @@ bool BlockStore::readSwapFile(const BlockIndex& index, VoxelBlock* out, std::str
   }
   uint32_t crc = 0;
   f.read(reinterpret_cast<char*>(out->voxels.data()), sizeof(out->voxels));
+  f.read(reinterpret_cast<char*>(out->grey.data()), sizeof(out->grey));
   f.read(reinterpret_cast<char*>(&crc), sizeof(crc));
   if (!f) {
     *why = "short file";
@@ -105,7 +108,7 @@ bool BlockStore::readSwapFile(const BlockIndex& index, VoxelBlock* out, std::str
     *why = "file longer than a block";
     return false;
   }
-  if (crc32(out->voxels.data(), sizeof(out->voxels)) != crc) {
+  if (crc32(out->grey.data(), sizeof(out->grey), crc32(out->voxels.data(), sizeof(out->voxels))) != crc) {
     *why = "checksum mismatch";
     return false;
   }

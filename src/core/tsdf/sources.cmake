@@ -9,4 +9,5 @@ set(FM_TSDF_SOURCES
   tsdf_map.cpp
   tsdf_mesher.cpp
   map_session.cpp
+  occupancy_grid.cpp
 )

@@ -16,6 +16,24 @@ TsdfIntegratorKind parseTsdfIntegratorKind(const std::string& name) {
   throw std::invalid_argument("TsdfConfig.integrator must be 'cpu' or 'opencl', got '" + name + "'");
 }
 
+MeshColoring parseMeshColoring(const std::string& name) {
+  if (name == "intensity") return MeshColoring::kIntensity;
+  if (name == "height") return MeshColoring::kHeight;
+  if (name == "normal") return MeshColoring::kNormal;
+  if (name == "none") return MeshColoring::kNone;
+  throw std::invalid_argument("colour '" + name + "' unknown: intensity, height, normal or none");
+}
+
+const char* toString(MeshColoring coloring) {
+  switch (coloring) {
+    case MeshColoring::kIntensity: return "intensity";
+    case MeshColoring::kHeight: return "height";
+    case MeshColoring::kNormal: return "normal";
+    case MeshColoring::kNone: return "none";
+  }
+  return "?";
+}
+
 const char* toString(TsdfIntegratorKind kind) {
   switch (kind) {
     case TsdfIntegratorKind::kCpu:
@@ -39,6 +57,10 @@ const ParamTable<TsdfConfig>& TsdfConfig::params() {
                 "Cap of the per-voxel observation count (written into map files)")
         .number("min_observations", [](TsdfConfig& c) -> int& { return c.min_observations; }, R::atLeast(1), "",
                 "Mesh and cloud keep voxels observed at least this often (a change re-meshes the map)", kRun)
+        .choice("colour", {"intensity", "height", "normal"}, [](const TsdfConfig& c) { return toString(c.colour); },
+                [](TsdfConfig& c, const std::string& v) { c.colour = parseMeshColoring(v); },
+                "Colour of the mesh (rviz markers, PLY export): intensity (the grey of the images fused into the "
+                "voxels; vertices without one: height), height (blue low to red high), normal")
         .number("max_range", [](TsdfConfig& c) -> double& { return c.max_range; }, R::atLeast(0), "m",
                 "Depth beyond this range is not fused; 0: no limit (applies to the next frame)", kRun)
         .numbers("local_map_size", 3, R::above(0), "m",

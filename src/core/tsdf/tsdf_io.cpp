@@ -2,9 +2,9 @@
 // before anything is replaced), readMapFileHeader. The CRC-32 is
 // block_store.h's; compression is zlib's.
 //
-// Layout, little-endian (version 3, written now):
+// Layout, little-endian (version 4, written now):
 //   0  char[8]  "FMTSDF01"
-//   8  uint32   version = 3
+//   8  uint32   version = 4
 //  12  float64  voxel_size
 //  20  float64  truncation_voxels
 //  28  uint64   number of blocks N
@@ -18,8 +18,12 @@
 //      tsdf values, then their float32 weights, each array of n values
 //      (voxel order, x fastest) stored byte-plane by byte-plane: byte 0 of
 //      every value, then byte 1, ... (value s's byte k at k * n + s; the
-//      exponent bytes then sit together and deflate well). Voxels not stored
-//      are {0, 0}.
+//      exponent bytes then sit together and deflate well), then their n
+//      uint8 intensities (VoxelBlock::grey; 0 = none). Voxels not stored are
+//      {0, 0} with intensity 0 (a voxel is stored unless all of its 9 bytes
+//      are zero).
+// Version 3 (read; written on request): the same without the intensities
+//   (they load as 0, none); a voxel is stored unless its 8 bytes are zero.
 // Version 2 (read; written on request): the same header (version = 2), then N
 //   records: int32 x, y, z; 512 x {float32 tsdf, float32 weight} (x fastest);
 //   uint32 CRC-32 of the record's first 4108 bytes.
@@ -55,6 +59,7 @@ constexpr size_t kRecordV1 = kPayload;
 constexpr size_t kRecordV2 = kPayload + sizeof(uint32_t);
 constexpr size_t kMaskBytes = FM_BLOCK_VOXELS / 8;                   // 64
 constexpr size_t kRawV3 = kMaskBytes + sizeof(VoxelBlock::voxels);  // inflated size of a full block
+constexpr size_t kRawV4 = kRawV3 + sizeof(VoxelBlock::grey);          // the same with intensities
 constexpr size_t kHeadV3 = 3 * sizeof(int32_t) + sizeof(uint32_t);  // index, compressed size
 // The smallest zlib stream (of nothing) is 8 bytes: a record has at least
 // head + 8 + CRC bytes, which bounds the block count by the file size.
@@ -99,7 +104,7 @@ MapFileInfo parseHeader(const std::string& path, const char* bytes, size_t avail
   info.voxel_size = readAt<double>(bytes + 12);
   info.truncation_voxels = readAt<double>(bytes + 20);
   info.num_blocks = readAt<uint64_t>(bytes + 28);
-  if (info.version == 2 || info.version == 3) {
+  if (info.version >= 2 && info.version <= 4) {
     if (available < kHeaderV2) fail(path, "not a fisheye_mapping TSDF map (bad header: too short)");
     info.max_weight = readAt<float>(bytes + 36);
     if (crc32(bytes, 40) != readAt<uint32_t>(bytes + 40)) {
@@ -258,7 +263,7 @@ float unplane(const unsigned char* planes, size_t n, size_t s) {
 std::string zlibError(int rc) {
   switch (rc) {
     case Z_DATA_ERROR: return "damaged or incomplete deflate data";
-    case Z_BUF_ERROR: return "inflates to more than " + std::to_string(kRawV3) + " bytes";
+    case Z_BUF_ERROR: return "inflates to more than a block's bytes";
     case Z_MEM_ERROR: return "out of memory";
     default: return std::string("zlib error ") + std::to_string(rc);
   }
@@ -267,12 +272,15 @@ std::string zlibError(int rc) {
 // Inflates block #i's payload (`packed`, n bytes) into `block`; throws naming
 // the block when the stream is damaged or does not match its mask.
 void inflateBlock(const BlockCheck& c, uint64_t i, const BlockIndex& b, const unsigned char* packed, uLong n,
-                  VoxelBlock* block) {
-  std::array<unsigned char, kRawV3> raw;
-  uLongf raw_len = raw.size();
+                  VoxelBlock* block, uint32_t version) {
+  std::array<unsigned char, kRawV4> raw;
+  const bool grey = version >= 4;
+  const size_t per_voxel = sizeof(FmVoxel) + (grey ? 1 : 0);
+  uLongf raw_len = grey ? kRawV4 : kRawV3;
   uLong used = n;
   const int rc = uncompress2(raw.data(), &raw_len, packed, &used);
-  const std::string name = blockName(i, b) + ": corrupt compressed voxels (format version 3): ";
+  const std::string name =
+      blockName(i, b) + ": corrupt compressed voxels (format version " + std::to_string(version) + "): ";
   if (rc != Z_OK) fail(c.path, name + zlibError(rc));
   if (used != n) fail(c.path, name + std::to_string(n - used) + " bytes after the end of the zlib stream");
   if (raw_len < kMaskBytes) {
@@ -280,22 +288,24 @@ void inflateBlock(const BlockCheck& c, uint64_t i, const BlockIndex& b, const un
   }
   size_t count = 0;
   for (size_t k = 0; k < kMaskBytes; ++k) count += static_cast<size_t>(__builtin_popcount(raw[k]));
-  if (raw_len != kMaskBytes + count * sizeof(FmVoxel)) {
+  if (raw_len != kMaskBytes + count * per_voxel) {
     fail(c.path, name + "inflates to " + std::to_string(raw_len) + " bytes, its mask of " + std::to_string(count) +
-                     " voxels needs " + std::to_string(kMaskBytes + count * sizeof(FmVoxel)));
+                     " voxels needs " + std::to_string(kMaskBytes + count * per_voxel));
   }
   const unsigned char* tsdf = raw.data() + kMaskBytes;
   const unsigned char* weight = tsdf + count * sizeof(float);
+  const unsigned char* intensity = weight + count * sizeof(float);
   size_t s = 0;
   for (int v = 0; v < FM_BLOCK_VOXELS; ++v) {
     if (!(raw[v / 8] & (1u << (v % 8)))) continue;
     block->voxels[v].tsdf = unplane(tsdf, count, s);
     block->voxels[v].weight = unplane(weight, count, s);
+    if (grey) block->grey[v] = intensity[s];
     ++s;
   }
 }
 
-// The blocks of a version 3 file (variable-size, compressed records).
+// The blocks of a version 3 or 4 file (variable-size, compressed records).
 BlockMap readBlocksV3(const MapFileInfo& info, const BlockCheck& c) {
   const std::string& path = c.path;
   const uint64_t room = info.file_size < kHeaderV2 ? 0 : (info.file_size - kHeaderV2) / kMinRecordV3;
@@ -305,7 +315,7 @@ BlockMap readBlocksV3(const MapFileInfo& info, const BlockCheck& c) {
         << info.num_blocks << " blocks, the file has room for at most " << room;
     fail(path, msg.str());
   }
-  const uLong max_packed = compressBound(kRawV3);
+  const uLong max_packed = compressBound(kRawV4);
   std::ifstream f(path, std::ios::binary);
   f.seekg(static_cast<std::streamoff>(kHeaderV2));
   BlockMap loaded;
@@ -328,7 +338,8 @@ BlockMap readBlocksV3(const MapFileInfo& info, const BlockCheck& c) {
       fail(path, blockName(i, b) + ": checksum mismatch (the block's bytes are damaged)");
     }
     auto block = std::make_unique<VoxelBlock>();
-    inflateBlock(c, i, b, reinterpret_cast<const unsigned char*>(buf.data() + kHeadV3), packed, block.get());
+    inflateBlock(c, i, b, reinterpret_cast<const unsigned char*>(buf.data() + kHeadV3), packed, block.get(),
+                 info.version);
     addBlock(c, i, b, std::move(block), &loaded, &ordinal);
     at += kHeadV3 + packed + sizeof(uint32_t);
   }
@@ -353,29 +364,36 @@ void appendRecordV2(const BlockIndex& b, const VoxelBlock& blk, std::vector<char
   std::memcpy(r + kPayload, &crc, sizeof(crc));
 }
 
-// Appends block b's version-3 record to `out` (layout at the top).
-void appendRecordV3(const BlockIndex& b, const VoxelBlock& blk, std::vector<char>* out, const std::string& path) {
-  std::array<unsigned char, kRawV3> raw{};
+// Appends block b's version-3 or -4 record to `out` (layout at the top).
+void appendRecordV3(const BlockIndex& b, const VoxelBlock& blk, std::vector<char>* out, const std::string& path,
+                    uint32_t version) {
+  std::array<unsigned char, kRawV4> raw{};
   static constexpr FmVoxel kEmpty{};
+  const bool grey = version >= 4;
   size_t count = 0;
   for (int v = 0; v < FM_BLOCK_VOXELS; ++v) {
-    if (std::memcmp(&blk.voxels[v], &kEmpty, sizeof(FmVoxel)) != 0) raw[v / 8] |= 1u << (v % 8), ++count;
+    if (std::memcmp(&blk.voxels[v], &kEmpty, sizeof(FmVoxel)) != 0 || (grey && blk.grey[v] != 0)) {
+      raw[v / 8] |= 1u << (v % 8), ++count;
+    }
   }
   unsigned char* tsdf = raw.data() + kMaskBytes;
   unsigned char* weight = tsdf + count * sizeof(float);
+  unsigned char* intensity = weight + count * sizeof(float);
   size_t s = 0;
   for (int v = 0; v < FM_BLOCK_VOXELS; ++v) {
     if (!(raw[v / 8] & (1u << (v % 8)))) continue;
     toPlanes(blk.voxels[v].tsdf, tsdf, count, s);
     toPlanes(blk.voxels[v].weight, weight, count, s);
+    if (grey) intensity[s] = blk.grey[v];
     ++s;
   }
+  const size_t per_voxel = sizeof(FmVoxel) + (grey ? 1 : 0);
   const size_t at = out->size();
-  uLongf packed = compressBound(kRawV3);
+  uLongf packed = compressBound(kRawV4);
   out->resize(at + kHeadV3 + packed + sizeof(uint32_t));
   char* r = out->data() + at;
   const int rc = compress2(reinterpret_cast<unsigned char*>(r + kHeadV3), &packed, raw.data(),
-                           kMaskBytes + count * sizeof(FmVoxel), kMapCompressionLevel);
+                           kMaskBytes + count * per_voxel, kMapCompressionLevel);
   if (rc != Z_OK) fail(path, "cannot compress the block at " + indexText(b) + ": " + zlibError(rc));
   const int32_t idx[3] = {b.x(), b.y(), b.z()};
   const uint32_t size = static_cast<uint32_t>(packed);
@@ -411,7 +429,7 @@ void loadMapFile(BlockStore& store, const std::string& path) {
   }
   const BlockCheck check{path, info.version == 1 ? config.max_weight : info.max_weight, config.blockSize()};
   // Read and check everything before touching the map.
-  BlockMap loaded = info.version == 3 ? readBlocksV3(info, check) : readBlocksFixed(info, check);
+  BlockMap loaded = info.version >= 3 ? readBlocksV3(info, check) : readBlocksFixed(info, check);
   store.replaceAll(std::move(loaded));
 }
 
@@ -422,8 +440,8 @@ void saveMapFile(BlockStore& store, const std::string& path, const MapSaveOption
   const fs::file_status st = fs::status(path, ec);
   if (fs::is_directory(st)) fail(path, "is a directory; give the map a file path (e.g. " + path + "/map.fmtsdf)");
   if (fs::exists(st) && !fs::is_regular_file(st)) fail(path, "exists and is not a regular file");
-  if (options.format_version != 2 && options.format_version != 3) {
-    fail(path, "cannot write map format version " + std::to_string(options.format_version) + " (only 2 or 3)");
+  if (options.format_version < 2 || options.format_version > 4) {
+    fail(path, "cannot write map format version " + std::to_string(options.format_version) + " (only 2, 3 or 4)");
   }
   if (options.refuse_empty_overwrite && store.numBlocks() == 0) {
     const std::string why = holdsData(path);
@@ -449,8 +467,8 @@ void saveMapFile(BlockStore& store, const std::string& path, const MapSaveOption
     // when that file is unreadable (the block is lost: saved without it).
     const VoxelBlock* blk = store.fetchInto(b, &from_disk);
     if (!blk) continue;
-    if (version == 3) {
-      appendRecordV3(b, *blk, &buf, path);
+    if (version >= 3) {
+      appendRecordV3(b, *blk, &buf, path, version);
     } else {
       appendRecordV2(b, *blk, &buf);
     }

@@ -54,7 +54,7 @@ const TsdfMap::RayTable& TsdfMap::raysFor(const CameraModel& camera) {
 
 IntegrationStats TsdfMap::integrate(const cv::Mat& depth, const CameraModel& camera,
                                     const Eigen::Isometry3d& T_W_C, const Eigen::Vector3d& vehicle_W,
-                                    const std::vector<Eigen::AlignedBox3d>& carve) {
+                                    const std::vector<Eigen::AlignedBox3d>& carve, const cv::Mat& grey) {
   if (depth.type() != CV_32FC1) {
     throw std::invalid_argument("depth image must be 32FC1 (metres of range along the ray), got OpenCV type " +
                                 std::to_string(depth.type()));
@@ -63,6 +63,16 @@ IntegrationStats TsdfMap::integrate(const cv::Mat& depth, const CameraModel& cam
     std::ostringstream msg;
     msg << "depth image is " << depth.cols << "x" << depth.rows << " but the camera is "
         << camera.width() << "x" << camera.height();
+    throw std::invalid_argument(msg.str());
+  }
+  if (!grey.empty() && grey.type() != CV_8UC1) {
+    throw std::invalid_argument("intensity image must be mono8 (CV_8UC1), got OpenCV type " +
+                                std::to_string(grey.type()));
+  }
+  if (!grey.empty() && (grey.cols != camera.width() || grey.rows != camera.height())) {
+    std::ostringstream msg;
+    msg << "intensity image is " << grey.cols << "x" << grey.rows << " but the camera is " << camera.width() << "x"
+        << camera.height();
     throw std::invalid_argument(msg.str());
   }
   if (!T_W_C.matrix().allFinite() || !vehicle_W.allFinite()) {
@@ -162,7 +172,8 @@ IntegrationStats TsdfMap::integrate(const cv::Mat& depth, const CameraModel& cam
     for (int c = 0; c < 4; ++c) T_C_W[4 * r + c] = static_cast<float>(T_C_W_d.matrix()(r, c));
   }
   std::vector<char> changed;
-  integrator_->integrate(work, depth_c, cam, T_C_W, &changed);
+  const cv::Mat grey_c = grey.empty() || grey.isContinuous() ? grey : grey.clone();
+  integrator_->integrate(work, depth_c, grey_c, cam, T_C_W, &changed);
   for (size_t n = 0; n < work.size(); ++n) {
     if (changed[n]) store_->markChanged(work[n].first);
   }
@@ -194,6 +205,14 @@ BlockIndex blockOf(const Eigen::Vector3i& g) {
 const FmVoxel* TsdfMap::voxel(const Eigen::Vector3i& g) {
   const BlockIndex b = blockOf(g);
   return voxelIn(block(b), b, g);
+}
+
+int TsdfMap::grey(const Eigen::Vector3i& g) {
+  const BlockIndex b = blockOf(g);
+  const VoxelBlock* blk = block(b);
+  if (!blk) return -1;
+  const Eigen::Vector3i l = g - b * FM_BLOCK_SIDE;
+  return blk->grey[VoxelBlock::linear(l.x(), l.y(), l.z())];
 }
 
 const FmVoxel* TsdfMap::voxel(const Eigen::Vector3i& g) const {

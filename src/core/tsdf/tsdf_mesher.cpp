@@ -14,6 +14,7 @@
 #include <array>
 #include <cmath>
 #include <cstring>
+#include <stdexcept>
 #include <utility>
 
 namespace fisheye_mapping {
@@ -35,6 +36,15 @@ Eigen::Vector3f edgeCrossing(const Eigen::Vector3i& g, int axis, float va, float
   Eigen::Vector3d p = g.cast<double>() + Eigen::Vector3d::Constant(0.5);
   p[axis] += t;
   return (p * voxel_size).cast<float>();
+}
+
+// The intensity at the zero crossing of an edge whose ends have values va, vb
+// and intensities ga, gb (0 = none).
+uint8_t edgeGrey(float va, float vb, uint8_t ga, uint8_t gb) {
+  if (ga == 0) return gb;
+  if (gb == 0) return ga;
+  const float t = va / (va - vb);
+  return static_cast<uint8_t>(std::lround(ga + t * (float(gb) - float(ga))));
 }
 
 // The axis along which edge e of a cube runs.
@@ -94,30 +104,40 @@ const std::array<std::array<uint8_t, 3>, kRampSteps + 1>& heightRamp() {
   return ramp;
 }
 
-std::vector<std::array<uint8_t, 3>> heightColors(const std::vector<Eigen::Vector3f>& vertices,
-                                                 const MeshExportOptions& options) {
-  double lo = options.z_min, hi = options.z_max;
-  if (std::isnan(lo) || std::isnan(hi)) {
-    double mn = INFINITY, mx = -INFINITY;
-    for (const auto& v : vertices) mn = std::min<double>(mn, v.z()), mx = std::max<double>(mx, v.z());
-    if (std::isnan(lo)) lo = mn;
-    if (std::isnan(hi)) hi = mx;
-  }
-  const double span = hi > lo ? hi - lo : 1.0;
-  std::vector<std::array<uint8_t, 3>> out;
-  out.reserve(vertices.size());
-  for (const auto& v : vertices) out.push_back(heightColor((v.z() - lo) / span));
-  return out;
-}
-
 }  // namespace
+
+std::array<uint8_t, 3> vertexColor(MeshColoring coloring, const Eigen::Vector3f& p, const Eigen::Vector3f& n,
+                                   uint8_t grey, double z_lo, double z_hi) {
+  switch (coloring) {
+    case MeshColoring::kIntensity:
+      if (grey != 0) return {grey, grey, grey};
+      break;  // no intensity: the height ramp
+    case MeshColoring::kNormal: {
+      std::array<uint8_t, 3> c;
+      for (int a = 0; a < 3; ++a) {
+        const float v = std::isfinite(n[a]) ? n[a] : 0.0f;
+        c[a] = cv::saturate_cast<uint8_t>(std::lround(127.5f * (v + 1.0f)));
+      }
+      return c;
+    }
+    case MeshColoring::kNone: return {128, 128, 128};
+    case MeshColoring::kHeight: break;
+  }
+  const double span = z_hi > z_lo ? z_hi - z_lo : 1.0;
+  return heightColor((p.z() - z_lo) / span);
+}
 
 std::array<uint8_t, 3> heightColor(double s) {
   const double c = s > 0.0 ? std::min(s, 1.0) : 0.0;  // NaN -> 0
   return heightRamp()[static_cast<int>(std::lround(c * kRampSteps))];
 }
 
-IndexedMesh weldTriangles(const std::vector<Eigen::Vector3f>& triangles, const MeshExportOptions& options) {
+IndexedMesh weldTriangles(const std::vector<Eigen::Vector3f>& triangles, const MeshExportOptions& options,
+                          const std::vector<uint8_t>& grey) {
+  if (!grey.empty() && grey.size() != triangles.size()) {
+    throw std::invalid_argument("weldTriangles: " + std::to_string(grey.size()) + " intensities for " +
+                                std::to_string(triangles.size()) + " vertices");
+  }
   IndexedMesh mesh;
   std::unordered_map<Eigen::Vector3f, uint32_t, PositionHash, PositionEqual> index;
   index.reserve(triangles.size() / 2);
@@ -129,13 +149,28 @@ IndexedMesh weldTriangles(const std::vector<Eigen::Vector3f>& triangles, const M
     std::array<uint32_t, 3> f;
     for (int c = 0; c < 3; ++c) {
       const auto [it, fresh] = index.emplace(p[c], static_cast<uint32_t>(mesh.vertices.size()));
-      if (fresh) mesh.vertices.push_back(p[c]);
+      if (fresh) {
+        mesh.vertices.push_back(p[c]);
+        mesh.grey.push_back(grey.empty() ? 0 : grey[t + c]);
+      }
       f[c] = it->second;
     }
     mesh.faces.push_back(f);
   }
   mesh.normals = vertexNormals(mesh);
-  if (options.coloring == MeshColoring::kHeight) mesh.colors = heightColors(mesh.vertices, options);
+  if (options.coloring != MeshColoring::kNone) {
+    double lo = options.z_min, hi = options.z_max;
+    if (std::isnan(lo) || std::isnan(hi)) {
+      double mn = INFINITY, mx = -INFINITY;
+      for (const auto& v : mesh.vertices) mn = std::min<double>(mn, v.z()), mx = std::max<double>(mx, v.z());
+      if (std::isnan(lo)) lo = mn;
+      if (std::isnan(hi)) hi = mx;
+    }
+    mesh.colors.reserve(mesh.vertices.size());
+    for (size_t i = 0; i < mesh.vertices.size(); ++i) {
+      mesh.colors.push_back(vertexColor(options.coloring, mesh.vertices[i], mesh.normals[i], mesh.grey[i], lo, hi));
+    }
+  }
   return mesh;
 }
 
@@ -177,6 +212,7 @@ BlockOutput TsdfMesher::computeBlock(const TsdfMap& map, const BlockIndex& index
   BlockOutput out;
   // Gather the (N)^3 voxel values; NaN marks voxels not observed often enough.
   std::array<float, N * N * N> val;
+  std::array<uint8_t, N * N * N> gval;  // intensities, 0 = none
   const VoxelBlock* nb[2][2][2];
   for (int dz = 0; dz < 2; ++dz)
     for (int dy = 0; dy < 2; ++dy)
@@ -184,17 +220,20 @@ BlockOutput TsdfMesher::computeBlock(const TsdfMap& map, const BlockIndex& index
   if (!nb[0][0][0]) return out;
   const float min_w = static_cast<float>(min_observations_);
   auto at = [&](int i, int j, int k) -> float& { return val[i + N * (j + N * k)]; };
+  auto gat = [&](int i, int j, int k) -> uint8_t& { return gval[i + N * (j + N * k)]; };
   for (int k = 0; k < N; ++k) {
     for (int j = 0; j < N; ++j) {
       for (int i = 0; i < N; ++i) {
         const VoxelBlock* b = nb[k / FM_BLOCK_SIDE][j / FM_BLOCK_SIDE][i / FM_BLOCK_SIDE];
         float v = NAN;
+        uint8_t g = 0;
         if (b) {
-          const FmVoxel& vox =
-              b->voxels[VoxelBlock::linear(i % FM_BLOCK_SIDE, j % FM_BLOCK_SIDE, k % FM_BLOCK_SIDE)];
-          if (vox.weight >= min_w) v = vox.tsdf;
+          const int l = VoxelBlock::linear(i % FM_BLOCK_SIDE, j % FM_BLOCK_SIDE, k % FM_BLOCK_SIDE);
+          const FmVoxel& vox = b->voxels[l];
+          if (vox.weight >= min_w) v = vox.tsdf, g = b->grey[l];
         }
         at(i, j, k) = v;
+        gat(i, j, k) = g;
       }
     }
   }
@@ -213,20 +252,24 @@ BlockOutput TsdfMesher::computeBlock(const TsdfMap& map, const BlockIndex& index
             const float v1 = at(q[0], q[1], q[2]);
             if (v1 == v1 && ((v0 < 0) != (v1 < 0))) {
               out.surface_points.push_back(edgeCrossing(first + Eigen::Vector3i(i, j, k), axis, v0, v1, vs));
+              out.surface_grey.push_back(edgeGrey(v0, v1, gat(i, j, k), gat(q[0], q[1], q[2])));
             }
           }
         }
         // Marching cubes on the cube whose lowest corner is (i, j, k).
         float cv[8];
+        uint8_t cg[8];
         bool complete = true;
         int cube = 0;
         for (int c = 0; c < 8 && complete; ++c) {
           cv[c] = at(i + kCorner[c][0], j + kCorner[c][1], k + kCorner[c][2]);
+          cg[c] = gat(i + kCorner[c][0], j + kCorner[c][1], k + kCorner[c][2]);
           complete = cv[c] == cv[c];
           if (cv[c] < 0.0f) cube |= 1 << c;
         }
         if (!complete || pcl::edgeTable[cube] == 0) continue;
         Eigen::Vector3f edge_vertex[12];
+        uint8_t edge_grey[12];
         for (int e = 0; e < 12; ++e) {
           if (pcl::edgeTable[cube] & (1 << e)) {
             // From the edge's lower corner, whatever the table's direction.
@@ -235,12 +278,12 @@ BlockOutput TsdfMesher::computeBlock(const TsdfMap& map, const BlockIndex& index
             if (kCorner[a][axis] > kCorner[b][axis]) std::swap(a, b);
             const Eigen::Vector3i g = first + Eigen::Vector3i(i + kCorner[a][0], j + kCorner[a][1], k + kCorner[a][2]);
             edge_vertex[e] = edgeCrossing(g, axis, cv[a], cv[b], vs);
+            edge_grey[e] = edgeGrey(cv[a], cv[b], cg[a], cg[b]);
           }
         }
-        for (int t = 0; pcl::triTable[cube][t] != -1; t += 3) {
+        for (int t = 0; pcl::triTable[cube][t] != -1; ++t) {
           out.triangles.push_back(edge_vertex[pcl::triTable[cube][t]]);
-          out.triangles.push_back(edge_vertex[pcl::triTable[cube][t + 1]]);
-          out.triangles.push_back(edge_vertex[pcl::triTable[cube][t + 2]]);
+          out.triangle_grey.push_back(edge_grey[pcl::triTable[cube][t]]);
         }
       }
     }
@@ -302,19 +345,30 @@ size_t TsdfMesher::numTriangles() const {
   return n;
 }
 
-pcl::PointCloud<pcl::PointXYZ> TsdfMesher::surfaceCloud() const {
-  pcl::PointCloud<pcl::PointXYZ> cloud;
+pcl::PointCloud<pcl::PointXYZI> TsdfMesher::surfaceCloud() const {
+  pcl::PointCloud<pcl::PointXYZI> cloud;
   for (const auto& kv : blocks_) {
-    for (const auto& p : kv.second.surface_points) cloud.push_back(pcl::PointXYZ(p.x(), p.y(), p.z()));
+    const BlockOutput& b = kv.second;
+    for (size_t i = 0; i < b.surface_points.size(); ++i) {
+      pcl::PointXYZI q;
+      q.x = b.surface_points[i].x(), q.y = b.surface_points[i].y(), q.z = b.surface_points[i].z();
+      q.intensity = b.surface_grey[i];
+      cloud.push_back(q);
+    }
   }
   return cloud;
 }
 
 IndexedMesh TsdfMesher::indexedMesh(const MeshExportOptions& options) const {
   std::vector<Eigen::Vector3f> soup;
+  std::vector<uint8_t> grey;
   soup.reserve(numTriangles() * 3);
-  for (const auto& kv : blocks_) soup.insert(soup.end(), kv.second.triangles.begin(), kv.second.triangles.end());
-  return weldTriangles(soup, options);
+  grey.reserve(numTriangles() * 3);
+  for (const auto& kv : blocks_) {
+    soup.insert(soup.end(), kv.second.triangles.begin(), kv.second.triangles.end());
+    grey.insert(grey.end(), kv.second.triangle_grey.begin(), kv.second.triangle_grey.end());
+  }
+  return weldTriangles(soup, options, grey);
 }
 
 void TsdfMesher::saveMeshPly(const std::string& path, const MeshExportOptions& options) const {

@@ -92,9 +92,10 @@ class FrameSetMapper {
                          const std::optional<ImageBoxes>& boxes = std::nullopt,
                          double stamp_s = std::numeric_limits<double>::quiet_NaN());
   // The same with a given depth map of the reference camera instead of the
-  // sweep (e.g. ground-truth depth: the evaluation's reference map).
+  // sweep (e.g. ground-truth depth: the evaluation's reference map); `grey`
+  // the reference camera's image for the map's intensity (empty: none).
   FrameSetResult processDepth(cv::Mat depth, const Eigen::Isometry3d& T_W_B,
-                              const std::optional<ImageBoxes>& boxes = std::nullopt);
+                              const std::optional<ImageBoxes>& boxes = std::nullopt, const cv::Mat& grey = cv::Mat());
   // Pipelined: the same stages as process(), with the depth of this frame set
   // computed on the calling thread while this set's detection and the
   // previous set's masking and fusion run on other threads, so that a frame
@@ -127,8 +128,9 @@ class FrameSetMapper {
   ImageBoxes boxesFor(const cv::Mat& reference_image, const std::optional<ImageBoxes>& given, double* ms);
   // Masks the boxes (with a stamp, the detector's parked vehicles are kept)
   // and fuses.
+  // `image`: the reference camera's image (the map's intensity when it is CV_8UC1 of the camera's size).
   FrameSetResult maskAndFuse(FrameSetResult r, const ImageBoxes& boxes, const Eigen::Isometry3d& T_W_B,
-                             const RigCamera& reference, double stamp_s);
+                             const RigCamera& reference, double stamp_s, const cv::Mat& image = cv::Mat());
   // The depth stage's result for the images, with the calibration snapshot.
   FrameSetResult depthOf(const std::vector<cv::Mat>& images);
   FrameSetMapperConfig config_;

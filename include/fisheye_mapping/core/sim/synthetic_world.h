@@ -177,6 +177,14 @@ class World {
                const Eigen::Isometry3d& T_W_C, double time, uint64_t noise_seed,
                const SensorModel& sensor = SensorModel()) const;
 
+  // Ground truth of a planner's obstacle grid (OccupancyGrid's values) at
+  // world (x, y), for the static scene with its parked vehicles (moving
+  // vehicles are left out): 100 (occupied) when a solid lies in the column
+  // between obstacle_height and vehicle_height above the ground (z = 0);
+  // 0 (free) when the ground (road, kerb, pavement below obstacle_height) is
+  // the first surface under vehicle_height and nothing else is there; -1 when
+  // there is no ground.
+  int8_t occupancyAt(double x, double y, double obstacle_height, double vehicle_height) const;
   // The static scene as a triangle mesh (binary PLY), for map evaluation.
   void saveStaticMeshPly(const std::string& path) const;
 

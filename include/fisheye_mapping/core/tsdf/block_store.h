@@ -52,6 +52,8 @@ struct BlockIndexHash {
 
 struct VoxelBlock {
   std::array<FmVoxel, FM_BLOCK_VOXELS> voxels{};  // x fastest: i + 8 j + 64 k
+  // Each voxel's intensity (tsdf_shared.h: 1..255, 0 = none yet), same order.
+  std::array<unsigned char, FM_BLOCK_VOXELS> grey{};
   static int linear(int i, int j, int k) { return i + FM_BLOCK_SIDE * (j + FM_BLOCK_SIDE * k); }
 };
 

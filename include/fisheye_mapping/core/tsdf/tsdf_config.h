@@ -29,11 +29,26 @@ TsdfIntegratorKind parseTsdfIntegratorKind(const std::string& name);
 // "cpu" or "opencl".
 const char* toString(TsdfIntegratorKind kind);
 
+// Per-vertex colour of the mesh (rviz markers and exports).
+enum class MeshColoring {
+  kIntensity,  // the grey of the images fused into the voxels (vertices without one: the height ramp)
+  kHeight,     // world z through a blue (low) -> red (high) hue ramp
+  kNormal,     // the unit normal n as (n + 1) / 2 in red, green, blue
+  kNone,       // no colour properties (exports only; markers are then grey)
+};
+
+// "intensity" | "height" | "normal" | "none"; throws std::invalid_argument
+// naming the bad value.
+MeshColoring parseMeshColoring(const std::string& name);
+const char* toString(MeshColoring coloring);
+
 struct TsdfConfig {
   double voxel_size = 0.05;        // metres
   double truncation_voxels = 4.0;  // mu = truncation_voxels * voxel_size
   float max_weight = 100.0f;       // cap of the per-voxel observation count
   int min_observations = 3;        // outputs keep voxels observed at least this often
+  // Colour of the mesh (rviz markers, PLY export); parameter `colour`.
+  MeshColoring colour = MeshColoring::kIntensity;
   double max_range = 0.0;          // depth beyond this many metres is not fused (0: no limit)
   // Active box around the vehicle (world axes): centre = vehicle + offset.
   Eigen::Vector3d local_map_size = Eigen::Vector3d(60.0, 60.0, 3.0);

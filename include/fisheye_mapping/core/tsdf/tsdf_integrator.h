@@ -30,6 +30,9 @@ class TsdfIntegrator {
   // to blocks.size()) to 1 for each block whose voxels changed, 0 otherwise.
   //   depth: CV_32FC1, continuous, the camera's size; metres of range along
   //          each pixel's ray; NaN, inf or <= 0 where there is none.
+  //   grey: CV_8UC1, continuous, the camera's size (the image the depth was
+  //         computed for), averaged into the intensity of the voxels near the
+  //         surface; empty: no intensity (the voxels' grey stays as it is).
   //   camera: the depth map's camera model (float parameters).
   //   T_C_W: row-major 3x4 [R | t] from the world frame to the camera frame
   //          (metres).
@@ -37,8 +40,8 @@ class TsdfIntegrator {
   // frame. Not thread-safe (one call at a time per integrator); the blocks'
   // storage must not be touched by anything else during the call. The CPU
   // backend uses config.threads threads (0: the OpenMP default).
-  virtual void integrate(const BlockWork& blocks, const cv::Mat& depth, const FmCameraT<float>& camera,
-                         const float T_C_W[12], std::vector<char>* changed) = 0;
+  virtual void integrate(const BlockWork& blocks, const cv::Mat& depth, const cv::Mat& grey,
+                         const FmCameraT<float>& camera, const float T_C_W[12], std::vector<char>* changed) = 0;
 };
 
 // The backend config.integrator names. Throws std::invalid_argument for an

@@ -22,7 +22,7 @@ class TsdfIntegratorCl : public TsdfIntegrator {
   TsdfIntegratorKind kind() const override { return TsdfIntegratorKind::kOpenCl; }
   const std::string& deviceName() const { return ctx_.deviceName(); }
 
-  void integrate(const BlockWork& blocks, const cv::Mat& depth, const FmCameraT<float>& camera,
+  void integrate(const BlockWork& blocks, const cv::Mat& depth, const cv::Mat& grey, const FmCameraT<float>& camera,
                  const float T_C_W[12], std::vector<char>* changed) override;
 
  private:
@@ -31,9 +31,10 @@ class TsdfIntegratorCl : public TsdfIntegrator {
   float voxel_size_, mu_, max_weight_;  // metres, metres, observations
   OpenClContext ctx_;
   cl::Kernel kernel_;
-  cl::Buffer voxels_, coords_, depth_, camera_, pose_, changed_;
-  size_t voxels_cap_ = 0, coords_cap_ = 0, depth_cap_ = 0, changed_cap_ = 0;
+  cl::Buffer voxels_, greys_, coords_, depth_, image_, camera_, pose_, changed_;
+  size_t voxels_cap_ = 0, greys_cap_ = 0, coords_cap_ = 0, depth_cap_ = 0, image_cap_ = 0, changed_cap_ = 0;
   std::vector<FmVoxel> staging_;
+  std::vector<unsigned char> grey_staging_;
   std::vector<int> coords_host_, changed_host_;
 };
 

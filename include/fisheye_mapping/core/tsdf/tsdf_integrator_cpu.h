@@ -16,7 +16,7 @@ class TsdfIntegratorCpu : public TsdfIntegrator {
  public:
   explicit TsdfIntegratorCpu(const TsdfConfig& config);
   TsdfIntegratorKind kind() const override { return TsdfIntegratorKind::kCpu; }
-  void integrate(const BlockWork& blocks, const cv::Mat& depth, const FmCameraT<float>& camera,
+  void integrate(const BlockWork& blocks, const cv::Mat& depth, const cv::Mat& grey, const FmCameraT<float>& camera,
                  const float T_C_W[12], std::vector<char>* changed) override;
 
  private:

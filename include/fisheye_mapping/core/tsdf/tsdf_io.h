@@ -1,9 +1,11 @@
 // TSDF map files: the blocks of a BlockStore (both the active and the swapped
 // ones) to a binary file and back, bit-identical. Layout in tsdf_io.cpp.
-// Version 3 (written now) stores per block only the voxels that hold
-// something (weight > 0), zlib-compressed, with max_weight, a CRC32 of the
-// header and one per block; version 2 (every voxel, the same checksums) is
-// read, and written on request; version 1 (no checksums) is still read.
+// Version 4 (written now) stores per block only the voxels that hold
+// something (weight > 0), with their intensity, zlib-compressed, with
+// max_weight, a CRC32 of the header and one per block; version 3 (the same
+// without intensities: they load as 0, none) and version 2 (every voxel, no
+// intensity, the same checksums) are read, and written on request; version 1
+// (no checksums) is still read.
 // Depends on the store only (no integrator, no camera).
 //
 // Thread-safety: the functions taking a store need exclusive access to it;
@@ -32,9 +34,10 @@ struct MapSaveOptions {
   // Refuse (throw, nothing written) to replace a file holding blocks (or one
   // that is not a readable map) by a map with no blocks.
   bool refuse_empty_overwrite = false;
-  // 3: compact and compressed (the default); 2: every voxel of every block,
-  // for readers older than version 3. Others: refused (std::runtime_error).
-  uint32_t format_version = 3;
+  // 4: compact and compressed, with the intensities (the default); 3: the
+  // same without intensities, 2: every voxel of every block, no intensities
+  // (for older readers). Others: refused (std::runtime_error).
+  uint32_t format_version = 4;
 };
 
 // Writes every block of `store` (options.format_version, with the store config's

@@ -76,11 +76,14 @@ class TsdfMap {
   // update). `carve`: world regions whose blocks in memory are fused too,
   // though no ray ends near them: their voxels in front of what the depth
   // sees now are carved free (a parked car that drove off leaves no ghost;
-  // VehicleMotionTracker::ghostRegions). Throws std::invalid_argument (map
-  // untouched) for a wrong encoding or size, or a non-finite pose.
+  // VehicleMotionTracker::ghostRegions). `grey`: the image the depth was
+  // computed for (CV_8UC1, the camera's size), averaged into the intensity
+  // of the voxels near the surface (tsdf_shared.h); empty: no intensity.
+  // Throws std::invalid_argument (map untouched) for a wrong encoding or
+  // size of either image, or a non-finite pose.
   IntegrationStats integrate(const cv::Mat& depth, const CameraModel& camera,
                              const Eigen::Isometry3d& T_W_C, const Eigen::Vector3d& vehicle_W,
-                             const std::vector<Eigen::AlignedBox3d>& carve = {});
+                             const std::vector<Eigen::AlignedBox3d>& carve = {}, const cv::Mat& grey = cv::Mat());
 
   // Moves the local map to the vehicle (world, metres): active blocks outside
   // the new box are swapped out, stored blocks inside it swapped back in.
@@ -103,6 +106,9 @@ class TsdfMap {
   // world frame) from either store, or nullptr; as block().
   const FmVoxel* voxel(const Eigen::Vector3i& global_voxel);
   const FmVoxel* voxel(const Eigen::Vector3i& global_voxel) const;
+  // The voxel's intensity (1..255; 0 = none yet), or -1 where voxel() gives
+  // nullptr; as block().
+  int grey(const Eigen::Vector3i& global_voxel);
   bool isActive(const BlockIndex& index) const { return store_->isActive(index); }
   // Frees the copies of disk-swapped blocks that block() read.
   void dropSwapCache() { store_->dropReadCache(); }

@@ -28,17 +28,16 @@ namespace fisheye_mapping {
 
 struct BlockOutput {
   std::vector<Eigen::Vector3f> triangles;  // 3 vertices per triangle, world frame
+  // The intensity at each vertex of `triangles` (same order): the grey of the
+  // edge's two voxels interpolated at the crossing (one alone when the other
+  // has none), 1..255; 0 = none (neither voxel has an intensity).
+  std::vector<uint8_t> triangle_grey;
   std::vector<Eigen::Vector3f> surface_points;
-};
-
-// Per-vertex colour of an exported mesh.
-enum class MeshColoring {
-  kHeight,  // world z through a blue (low) -> red (high) hue ramp (the voxels carry no intensity)
-  kNone,    // no colour properties
+  std::vector<uint8_t> surface_grey;  // the same for surface_points
 };
 
 struct MeshExportOptions {
-  MeshColoring coloring = MeshColoring::kHeight;
+  MeshColoring coloring = MeshColoring::kIntensity;
   // The z range (world frame, metres) spanned by the height ramp; values
   // outside are clamped. NaN: the mesh's own lowest and highest vertex.
   double z_min = NAN, z_max = NAN;
@@ -50,6 +49,7 @@ struct MeshExportOptions {
 // towards the observed free space), and colours (empty for kNone).
 struct IndexedMesh {
   std::vector<Eigen::Vector3f> vertices;
+  std::vector<uint8_t> grey;  // intensity per vertex (0 = none), as BlockOutput::triangle_grey
   std::vector<Eigen::Vector3f> normals;
   std::vector<std::array<uint8_t, 3>> colors;  // red, green, blue
   std::vector<std::array<uint32_t, 3>> faces;  // indices into vertices
@@ -57,9 +57,17 @@ struct IndexedMesh {
 
 // Welds a triangle soup (3 vertices per triangle) by exact position (-0 and
 // +0 alike), drops triangles that collapse to a line or a point (a zero-area
-// corner case of marching cubes), then adds normals and colours.
+// corner case of marching cubes), then adds normals and colours. `grey`: the
+// intensity of each soup vertex (empty: none anywhere; then kIntensity
+// colours by height).
 IndexedMesh weldTriangles(const std::vector<Eigen::Vector3f>& triangles,
-                          const MeshExportOptions& options = MeshExportOptions());
+                          const MeshExportOptions& options = MeshExportOptions(),
+                          const std::vector<uint8_t>& grey = {});
+
+// The colour of one vertex: p its position, n its unit normal, grey its
+// intensity (0 = none), z_lo..z_hi the height ramp's range (metres).
+std::array<uint8_t, 3> vertexColor(MeshColoring coloring, const Eigen::Vector3f& p, const Eigen::Vector3f& n,
+                                   uint8_t grey, double z_lo, double z_hi);
 
 // The height ramp: s in [0, 1] (clamped; NaN as 0) to red, green, blue,
 // hue falling from 240 degrees (blue) at 0 to 0 degrees (red) at 1, full
@@ -84,7 +92,8 @@ class TsdfMesher {
 
   const std::unordered_map<BlockIndex, BlockOutput, BlockIndexHash>& blocks() const { return blocks_; }
   size_t numTriangles() const;
-  pcl::PointCloud<pcl::PointXYZ> surfaceCloud() const;
+  // Surface points with their intensity (0: none).
+  pcl::PointCloud<pcl::PointXYZI> surfaceCloud() const;
 
   // Every block's triangles welded into one mesh (weldTriangles).
   IndexedMesh indexedMesh(const MeshExportOptions& options = MeshExportOptions()) const;

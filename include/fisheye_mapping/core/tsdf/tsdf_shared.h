@@ -5,7 +5,13 @@
  *
  * A voxel stores D, the truncated signed distance divided by the truncation
  * mu (so D lies in [-1, 1], positive in front of the surface), and w, the
- * number of observations fused so far, capped at a maximum.
+ * number of observations fused so far, capped at a maximum. Beside each
+ * voxel (in VoxelBlock::grey, not in FmVoxel, so that the map's memory grows
+ * by an eighth and not by half), its intensity: the grey value of the pixels
+ * fused into it, averaged with the voxel's weight (capped at
+ * FM_GREY_MAX_WEIGHT, so that it follows the newest views), as 1..255;
+ * 0 = none yet (never seen by an image, or a map file from before the
+ * intensity channel).
  */
 #ifndef FISHEYE_MAPPING_CORE_TSDF_TSDF_SHARED_H_
 #define FISHEYE_MAPPING_CORE_TSDF_TSDF_SHARED_H_
@@ -16,6 +22,8 @@ namespace fisheye_mapping {
 
 #define FM_BLOCK_SIDE 8
 #define FM_BLOCK_VOXELS 512
+/* Cap of the weight that averages a voxel's intensity (rounded to 1..255). */
+#define FM_GREY_MAX_WEIGHT 16.0f
 
 struct FmVoxel {
   float tsdf;   /* D in [-1, 1] */
@@ -44,12 +52,35 @@ FM_FN int fm_tsdf_update(FM_GLOBAL struct FmVoxel* v, float eta, float mu, float
   return 1;
 }
 
+/* Averages the grey value g (0..255) of an observation into a voxel's
+ * intensity *grey (0 = none yet) whose TSDF weight before this observation was
+ * w: *grey <- round((w' *grey + g) / (w' + 1)), w' = min(w, FM_GREY_MAX_WEIGHT);
+ * the first observation (or *grey == 0) sets it to round(g); always >= 1. */
+FM_FN void fm_grey_update(FM_GLOBAL unsigned char* grey, float w, float g) {
+  float wg = (w < FM_GREY_MAX_WEIGHT) ? w : FM_GREY_MAX_WEIGHT;
+  if (*grey == 0) {
+    wg = 0.0f;
+  }
+  float value = (wg * (float)(*grey) + g) / (wg + 1.0f) + 0.5f;
+  if (value < 1.0f) {
+    value = 1.0f;
+  }
+  if (value > 255.0f) {
+    value = 255.0f;
+  }
+  *grey = (unsigned char)value;
+}
+
 /* Integrates the depth map into one voxel whose centre is p_W (world frame).
  * T_C_W is row-major 3x4 (rotation | translation) mapping world to camera.
- * depth: row-major, width x height metres of range along the ray, NaN invalid. */
-FM_FN int fm_tsdf_integrate_voxel(FM_GLOBAL struct FmVoxel* v, float px, float py, float pz,
-                                  const FM_CAM_FLOAT* cam, const float* T_C_W,
-                                  FM_GLOBAL const float* depth, float mu, float max_weight) {
+ * depth: row-major, width x height metres of range along the ray, NaN invalid.
+ * image: the same camera's grey image (width x height bytes, row-major), or
+ * 0 (no intensity); a voxel within the truncation band of the surface
+ * (|eta| <= mu) takes the nearest pixel's grey into *grey (fm_grey_update). */
+FM_FN int fm_tsdf_integrate_voxel(FM_GLOBAL struct FmVoxel* v, FM_GLOBAL unsigned char* grey, float px, float py,
+                                  float pz, const FM_CAM_FLOAT* cam, const float* T_C_W,
+                                  FM_GLOBAL const float* depth, FM_GLOBAL const unsigned char* image, float mu,
+                                  float max_weight) {
   const float x = T_C_W[0] * px + T_C_W[1] * py + T_C_W[2] * pz + T_C_W[3];
   const float y = T_C_W[4] * px + T_C_W[5] * py + T_C_W[6] * pz + T_C_W[7];
   const float z = T_C_W[8] * px + T_C_W[9] * py + T_C_W[10] * pz + T_C_W[11];
@@ -63,12 +94,21 @@ FM_FN int fm_tsdf_integrate_voxel(FM_GLOBAL struct FmVoxel* v, float px, float p
   if (u < -0.5f || vv < -0.5f || iu < 0 || iv < 0 || iu >= cam->width || iv >= cam->height) {
     return 0;
   }
-  const float measured = depth[iv * cam->width + iu];
+  const int pixel = iv * cam->width + iu;
+  const float measured = depth[pixel];
   if (!(measured > 0.0f) || measured != measured || measured > 1e30f) {
     return 0; /* NaN, inf or non-positive: no measurement */
   }
   const float range = FM_SQRT(x * x + y * y + z * z);
-  return fm_tsdf_update(v, measured - range, mu, max_weight);
+  const float eta = measured - range;
+  const float w_before = v->weight;
+  if (!fm_tsdf_update(v, eta, mu, max_weight)) {
+    return 0;
+  }
+  if (image && eta <= mu) {
+    fm_grey_update(grey, w_before, (float)image[pixel]);
+  }
+  return 1;
 }
 
 #ifndef FM_OPENCL
