@@ -99,6 +99,10 @@ class PlayerLaunch : public ::testing::Test {
            ::testing::UnitTest::GetInstance()->current_test_info()->name();
     ASSERT_EQ(std::system(("rm -rf " + dir_ + " && mkdir -p " + dir_).c_str()), 0);
   }
+  // The logs and drives stay for a look after a failure.
+  void TearDown() override {
+    if (!HasFailure()) std::system(("rm -rf " + dir_).c_str());
+  }
   // A 1 s small-rig drive at 10 Hz (10 frame sets) in dir_/drive.
   void makeDrive() {
     const std::string make = std::string(FM_MAKE_DRIVE) + " --out " + dir_ + "/drive --camchain " + kData +
