@@ -3,16 +3,27 @@
 // delay (a slow machine), as the TSDF stage does. Checks that every frame set
 // of a drive is played and none overlaps the previous one, and that bags
 // without /tf, without a camera or with stamps going backwards are named and
-// stop the player with exit status 1.
+// stop the player with exit status 1. ~hold: after the drive the clock goes
+// on and the last pose is published again with a new stamp each time (never
+// a stamp tf2 already has: TF_REPEATED_DATA). ~publish_camera_info: each
+// image comes with its camera's CameraInfo from the camchain (stamp and
+// frame_id of the image); the wrong image size, a bag with CameraInfo of its
+// own and a missing camchain are named.
 #include <gtest/gtest.h>
 #include <ros/ros.h>
 #include <rosbag/bag.h>
+#include <rosgraph_msgs/Clock.h>
+#include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
+#include <signal.h>
 #include <tf2_msgs/TFMessage.h>
+#include <unistd.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <map>
 #include <mutex>
 #include <sstream>
 #include <string>
@@ -25,14 +36,15 @@ namespace {
 
 const std::string kCam0 = "/cam0/image_raw", kCam1 = "/cam1/image_raw";
 
-sensor_msgs::Image image(double t, const std::string& frame) {
+sensor_msgs::Image image(double t, const std::string& frame, int width = 4, int height = 4) {
   sensor_msgs::Image m;
   m.header.stamp = ros::Time(t);
   m.header.frame_id = frame;
-  m.height = m.width = 4;
+  m.height = height;
+  m.width = width;
   m.encoding = "mono8";
-  m.step = 4;
-  m.data.assign(16, 100);
+  m.step = width;
+  m.data.assign(std::size_t(width) * height, 100);
   return m;
 }
 
@@ -48,18 +60,31 @@ tf2_msgs::TFMessage pose(double t) {
   return m;
 }
 
+// What writeBag puts in a bag beyond its frame sets.
+struct BagOptions {
+  int width = 4, height = 4;      // the images' size
+  std::string cam1_frame = "cam1";
+  bool with_camera_info = false;  // a CameraInfo of cam0 (/cam0/camera_info) with each frame set
+};
+
 // Writes a bag: frame sets at 1.0, 1.1, ... with a pose before each; cam1's
 // stamps may be given (to make them go backwards).
 std::string writeBag(const std::string& name, int sets, bool with_tf, bool with_cam1,
-                     const std::vector<double>& cam1_stamps = {}) {
+                     const std::vector<double>& cam1_stamps = {}, const BagOptions& o = BagOptions()) {
   const std::string path = "/tmp/fisheye_mapping_paced_" + std::to_string(getpid()) + "_" + name + ".bag";
   rosbag::Bag bag(path, rosbag::bagmode::Write);
   for (int k = 0; k < sets; ++k) {
     const double t = 1.0 + 0.1 * k;
     const ros::Time rt(t);
     if (with_tf) bag.write("/tf", rt, pose(t));
-    bag.write(kCam0, rt, image(t, "cam0"));
-    if (with_cam1) bag.write(kCam1, rt, image(cam1_stamps.empty() ? t : cam1_stamps[k], "cam1"));
+    if (o.with_camera_info) {
+      sensor_msgs::CameraInfo info;
+      info.header.stamp = rt;
+      info.header.frame_id = "cam0";
+      bag.write("/cam0/camera_info", rt, info);
+    }
+    bag.write(kCam0, rt, image(t, "cam0", o.width, o.height));
+    if (with_cam1) bag.write(kCam1, rt, image(cam1_stamps.empty() ? t : cam1_stamps[k], o.cam1_frame, o.width, o.height));
   }
   bag.close();
   return path;
@@ -101,30 +126,52 @@ struct Pipeline {
   }
 };
 
-// Runs the player on `bag` under the node name `name`; returns its exit
-// status and leaves its output in *log.
-int runPlayer(const std::string& name, const std::string& bag, std::string* log, const std::string& summary = "") {
-  ros::param::set("/" + name + "/bag", bag);
-  ros::param::set("/" + name + "/image_topics", std::vector<std::string>{kCam0, kCam1});
-  ros::param::set("/" + name + "/hold", false);
-  ros::param::set("/" + name + "/timeout", 10.0);
-  ros::param::set("/" + name + "/wait_subscribers", 20.0);
-  if (!summary.empty()) ros::param::set("/" + name + "/summary_file", summary);
-  const std::string out = "/tmp/fisheye_mapping_paced_" + std::to_string(getpid()) + "_" + name + ".log";
-  const std::string cmd = std::string(FM_PACED_PLAYER) + " __name:=" + name + " > " + out + " 2>&1";
-  const int status = std::system(cmd.c_str());
-  std::ifstream f(out);
-  std::stringstream ss;
-  ss << f.rdbuf();
-  *log = ss.str();
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
-
 std::string readFile(const std::string& path) {
   std::ifstream f(path);
   std::stringstream ss;
   ss << f.rdbuf();
   return ss.str();
+}
+
+const std::string kTwoCameraRig = std::string(FM_TEST_DATA_DIR) + "/two_camera";
+
+// The player's parameters: `bag`, the two image topics (none with
+// `image_topics` false), hold off, short waits; `extra` over them (bool
+// values "true" / "false", anything else a string).
+void setPlayerParams(const std::string& name, const std::string& bag, bool image_topics = true,
+                     const std::map<std::string, std::string>& extra = {}) {
+  ros::param::set("/" + name + "/bag", bag);
+  if (image_topics) ros::param::set("/" + name + "/image_topics", std::vector<std::string>{kCam0, kCam1});
+  ros::param::set("/" + name + "/hold", false);
+  ros::param::set("/" + name + "/timeout", 10.0);
+  ros::param::set("/" + name + "/wait_subscribers", 20.0);
+  for (const auto& [key, value] : extra) {
+    if (value == "true" || value == "false") {
+      ros::param::set("/" + name + "/" + key, value == "true");
+    } else {
+      ros::param::set("/" + name + "/" + key, value);
+    }
+  }
+}
+
+std::string playerCommand(const std::string& name, const std::string& out) {
+  return std::string(FM_PACED_PLAYER) + " __name:=" + name + " > " + out + " 2>&1";
+}
+
+std::string logPath(const std::string& name) {
+  return "/tmp/fisheye_mapping_paced_" + std::to_string(getpid()) + "_" + name + ".log";
+}
+
+// Runs the player on `bag` under the node name `name`; returns its exit
+// status and leaves its output in *log.
+int runPlayer(const std::string& name, const std::string& bag, std::string* log, const std::string& summary = "",
+              bool image_topics = true, std::map<std::string, std::string> extra = {}) {
+  if (!summary.empty()) extra["summary_file"] = summary;
+  setPlayerParams(name, bag, image_topics, extra);
+  const std::string out = logPath(name);
+  const int status = std::system(playerCommand(name, out).c_str());
+  *log = readFile(out);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
 }  // namespace
@@ -162,6 +209,170 @@ TEST(PacedPlayer, BadBagsAreNamedAndStopThePlayer) {
   EXPECT_NE(log.find("stamps go backwards on /cam1/image_raw"), std::string::npos) << log;
   std::lock_guard<std::mutex> lock(pipeline.mutex);
   EXPECT_GE(pipeline.acked.size(), 3u);
+}
+
+// ~hold: the drive's last pose keeps coming after the drive, each time with a
+// later stamp and the clock at that stamp; tf2 never sees a stamp twice.
+TEST(PacedPlayer, HoldAdvancesTheClockAndNeverRepeatsAPoseStamp) {
+  Pipeline pipeline;
+  ros::NodeHandle nh;
+  std::mutex mu;
+  std::vector<double> tf_stamps, tf_x;  // base_link, in arrival order
+  std::vector<double> clocks;
+  auto tf_sub = nh.subscribe<tf2_msgs::TFMessage>(
+      "/tf", 100, boost::function<void(const tf2_msgs::TFMessage::ConstPtr&)>([&](const tf2_msgs::TFMessage::ConstPtr& m) {
+        std::lock_guard<std::mutex> lock(mu);
+        for (const auto& t : m->transforms) {
+          if (t.child_frame_id != "base_link") continue;
+          tf_stamps.push_back(t.header.stamp.toSec());
+          tf_x.push_back(t.transform.translation.x);
+        }
+      }));
+  auto clock_sub = nh.subscribe<rosgraph_msgs::Clock>(
+      "/clock", 100, boost::function<void(const rosgraph_msgs::Clock::ConstPtr&)>([&](const rosgraph_msgs::Clock::ConstPtr& m) {
+        std::lock_guard<std::mutex> lock(mu);
+        clocks.push_back(m->clock.toSec());
+      }));
+  const std::string name = "player_hold";
+  setPlayerParams(name, writeBag("hold", 4, true, true), true, {{"hold", "true"}});
+  const std::string out = logPath(name);
+  const std::string shell = "exec " + playerCommand(name, out);  // no allocation after fork()
+  const pid_t pid = fork();
+  if (pid == 0) {
+    execl("/bin/sh", "sh", "-c", shell.c_str(), static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  ASSERT_GT(pid, 0);
+  // The drive's 4 poses (1.0 .. 1.3), then at least 6 held ones (0.5 s apart).
+  const auto held = [&] {  // mu held by the caller
+    return std::count_if(tf_stamps.begin(), tf_stamps.end(), [](double s) { return s > 1.3 + 1e-6; });
+  };
+  const auto heldNow = [&] {
+    std::lock_guard<std::mutex> lock(mu);
+    return held();
+  };
+  const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(30.0);
+  while (heldNow() < 6 && ros::WallTime::now() < end) ros::WallDuration(0.05).sleep();
+  kill(pid, SIGINT);
+  int status = -1;
+  waitpid(pid, &status, 0);
+  const std::string log = readFile(out);
+  ASSERT_TRUE(WIFEXITED(status)) << log;
+  EXPECT_EQ(WEXITSTATUS(status), 0) << "Ctrl-C while holding is a normal end: " << log;
+  EXPECT_NE(log.find("holding the last pose of 1 frames"), std::string::npos) << log;
+
+  std::lock_guard<std::mutex> lock(mu);
+  ASSERT_GE(held(), 6) << log;
+  ASSERT_GE(tf_stamps.size(), 10u);
+  for (std::size_t i = 0; i < 4; ++i) EXPECT_NEAR(tf_stamps[i], 1.0 + 0.1 * i, 1e-9) << "the drive's pose " << i;
+  for (std::size_t i = 1; i < tf_stamps.size(); ++i) {
+    EXPECT_GT(tf_stamps[i], tf_stamps[i - 1]) << "pose " << i << " repeats or goes back from " << tf_stamps[i - 1];
+  }
+  for (std::size_t i = 4; i < tf_stamps.size(); ++i) {
+    EXPECT_DOUBLE_EQ(tf_x[i], 1.3) << "a held pose is the drive's last one";
+    EXPECT_NEAR(tf_stamps[i], 1.3 + 0.5 * (i - 3), 1e-6) << "held pose " << i << ": 0.5 s after the one before";
+  }
+  // The clock never goes back and reaches the held stamps.
+  for (std::size_t i = 1; i < clocks.size(); ++i) EXPECT_GE(clocks[i], clocks[i - 1]) << "clock " << i;
+  ASSERT_FALSE(clocks.empty());
+  EXPECT_GE(clocks.back(), tf_stamps.back() - 1e-6);
+}
+
+// ~publish_camera_info: the camchain's intrinsics (hand values of
+// test/data/two_camera_camchain.yaml) with every image, its stamp and frame_id;
+// an image without a frame_id gets the mount's frame of its camera. Before
+// the drive, the first image's CameraInfo goes out every 0.25 s while
+// anything subscribes (here: this test, so for the whole 3 s).
+TEST(PacedPlayer, PublishesEachCamerasCameraInfoWithEachImage) {
+  Pipeline pipeline;
+  ros::NodeHandle nh;
+  std::mutex mu;
+  std::map<std::string, std::vector<sensor_msgs::CameraInfo>> infos;  // topic -> messages
+  std::vector<ros::Subscriber> subs;
+  for (const std::string topic : {"/cam0/camera_info", "/cam1/camera_info"}) {
+    subs.push_back(nh.subscribe<sensor_msgs::CameraInfo>(
+        topic, 100,
+        boost::function<void(const sensor_msgs::CameraInfo::ConstPtr&)>([&, topic](const sensor_msgs::CameraInfo::ConstPtr& m) {
+          std::lock_guard<std::mutex> lock(mu);
+          infos[topic].push_back(*m);
+        })));
+  }
+  BagOptions o;
+  o.width = 1024;
+  o.height = 544;
+  o.cam1_frame = "";
+  std::string log;
+  const int status = runPlayer("player_info", writeBag("info", 3, true, true, {}, o), &log, "", false,
+                               {{"camchain", kTwoCameraRig + "_camchain.yaml"},
+                                {"mount", kTwoCameraRig + "_mount.yaml"},
+                                {"publish_camera_info", "true"}});
+  ASSERT_EQ(status, 0) << log;
+  EXPECT_NE(log.find("CameraInfo published for 3."), std::string::npos) << log;
+  EXPECT_NE(log.find("(still subscribed: going on)"), std::string::npos) << log;
+  ros::WallDuration(0.5).sleep();
+  std::lock_guard<std::mutex> lock(mu);
+  // 3 s at 4 Hz before the drive (at least 10: the first one, then every 0.25 s), then one per image.
+  const std::size_t n = infos["/cam0/camera_info"].size();
+  ASSERT_GE(n, 13u) << log;
+  ASSERT_LE(n, 17u) << log;
+  ASSERT_EQ(infos["/cam1/camera_info"].size(), n) << log;
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::size_t k = i + 3 < n ? 0 : i + 3 - n;  // the primer: the first image's
+    const sensor_msgs::CameraInfo& c0 = infos["/cam0/camera_info"][i];
+    const sensor_msgs::CameraInfo& c1 = infos["/cam1/camera_info"][i];
+    EXPECT_NEAR(c0.header.stamp.toSec(), 1.0 + 0.1 * k, 1e-9) << "CameraInfo " << i << " of " << n;
+    EXPECT_NEAR(c1.header.stamp.toSec(), 1.0 + 0.1 * k, 1e-9) << "CameraInfo " << i << " of " << n;
+    EXPECT_EQ(c0.header.frame_id, "cam0") << "the image's frame_id";
+    EXPECT_EQ(c1.header.frame_id, "cam1_optical") << "no frame_id in the image: the mount's";
+    EXPECT_EQ(c0.width, 1024u);
+    EXPECT_EQ(c0.height, 544u);
+    // cam0: Mei (omni), xi 1, fx = fy = 300, centre (512, 272), no distortion.
+    EXPECT_EQ(c0.distortion_model, "omni");
+    EXPECT_EQ(c0.D, (std::vector<double>{1.0, 0.0, 0.0, 0.0, 0.0}));
+    EXPECT_EQ(c0.K[0], 300.0);
+    EXPECT_EQ(c0.K[4], 300.0);
+    EXPECT_EQ(c0.K[2], 512.0);
+    EXPECT_EQ(c0.K[5], 272.0);
+    EXPECT_EQ(c0.K[8], 1.0);
+    // cam1: pinhole + equidistant (Kannala-Brandt).
+    EXPECT_EQ(c1.distortion_model, "equidistant");
+    EXPECT_EQ(c1.D, (std::vector<double>{0.0, 0.0, 0.0, 0.0}));
+    EXPECT_EQ(c1.K[0], 300.0);
+    EXPECT_EQ(c1.K[2], 512.0);
+  }
+}
+
+TEST(PacedPlayer, CameraInfoBadInputIsNamed) {
+  Pipeline pipeline;
+  std::string log;
+  const std::map<std::string, std::string> rig = {{"camchain", kTwoCameraRig + "_camchain.yaml"},
+                                                  {"mount", kTwoCameraRig + "_mount.yaml"},
+                                                  {"publish_camera_info", "true"}};
+  // No camchain: the intrinsics are unknown.
+  EXPECT_EQ(runPlayer("player_info_no_rig", writeBag("info_no_rig", 2, true, true), &log, "", true,
+                      {{"publish_camera_info", "true"}}),
+            2)
+      << log;
+  EXPECT_NE(log.find("~publish_camera_info needs ~camchain and ~mount"), std::string::npos) << log;
+  // 4x4 images for 1024x544 cameras: named, and nothing is played past it.
+  EXPECT_EQ(runPlayer("player_info_size", writeBag("info_size", 2, true, true), &log, "", false, rig), 1) << log;
+  // (cam0's or cam1's first image, whichever the bag gives first at the first stamp)
+  EXPECT_NE(log.find("~publish_camera_info: an image on /cam"), std::string::npos) << log;
+  EXPECT_NE(log.find("/image_raw is 4x4, its camera in " + kTwoCameraRig + "_camchain.yaml is 1024x544; stopping"),
+            std::string::npos)
+      << log;
+  EXPECT_NE(log.find("frame sets 0 played"), std::string::npos) << log;
+  {
+    std::lock_guard<std::mutex> lock(pipeline.mutex);
+    EXPECT_TRUE(pipeline.seen.empty()) << "an image was played";
+  }
+  // The bag has CameraInfo of its own on cam0's topic.
+  BagOptions o;
+  o.width = 1024;
+  o.height = 544;
+  o.with_camera_info = true;
+  EXPECT_EQ(runPlayer("player_info_dup", writeBag("info_dup", 2, true, true, {}, o), &log, "", false, rig), 2) << log;
+  EXPECT_NE(log.find("already has /cam0/camera_info"), std::string::npos) << log;
 }
 
 int main(int argc, char** argv) {

@@ -97,3 +97,4 @@ add_dependencies(test_tool_options param_docs rig_info refine_rig make_drive dep
 fm_add_test(test_own_rig_node ROSTEST test/launch/own_rig.test SOURCES test/test_own_rig_node.cpp DEPENDS fisheye_mapping_nodelets make_drive paced_player)
 fm_add_test(test_detector_eval SOURCES test/test_detector_eval.cpp DEPENDS detector_eval)
 fm_add_test(test_launch_files SOURCES test/test_launch_files.cpp INCLUDES ${PROJECT_SOURCE_DIR}/test)
+include(${CMAKE_CURRENT_LIST_DIR}/ros_tools.cmake)

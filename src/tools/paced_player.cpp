@@ -20,15 +20,30 @@
 //   start          seconds into the bag to begin (default 0)
 //   require_tf     the bag must hold /tf (default true: the map needs poses)
 //   summary_file   YAML with the counts, written at the end (optional)
-//   hold           after the drive, keep publishing the last pose of every
-//                  /tf frame (stamped with the last clock) until shut down,
-//                  so that a viewer started later still places the map
-//                  (default true)
+//   hold           after the drive, keep running until shut down: the clock
+//                  goes on at wall-clock speed and the last pose of every /tf
+//                  frame is published again twice a second, each time
+//                  stamped with the new clock (a stamp never repeats: tf2
+//                  would drop it as TF_REPEATED_DATA), so that a viewer
+//                  started later still places the map (default true)
+//   publish_camera_info  publish each camera's sensor_msgs/CameraInfo from
+//                  the camchain (its intrinsics, toCameraInfo) on
+//                  <image topic's namespace>/camera_info (image_transport's
+//                  convention: /cam0/image_raw -> /cam0/camera_info), just
+//                  before each image, with the image's stamp and frame_id, for
+//                  rig_source camera_info on a bag without CameraInfo
+//                  (default false; needs ~camchain and ~mount). Before the
+//                  drive it publishes the bag's /tf_static and every
+//                  camera's first CameraInfo until the pipeline has its rig
+//                  (at most 3 s), so that no frame set waits for it
 //
-// Exit status: 0 when the drive was played to its end, 1 on bad input (no bag,
-// a camera topic or /tf missing, stamps going backwards: the message names
-// it), 2 on bad parameters. On stamps going backwards it stops there, after
-// the pipeline has finished the frame sets already played.
+// Exit status: 0 when the drive was played to its end (with hold: when shut
+// down after it), 1 on bad input (no bag, a camera topic or /tf missing,
+// stamps going backwards, an image whose size is not its camera's with
+// ~publish_camera_info: the message names it), 2 on bad parameters. On bad
+// input in the drive (stamps going backwards) it stops there, after the
+// pipeline has finished the frame sets already played, and exits without
+// holding.
 #include <ros/ros.h>
 #include <rosbag/bag.h>
 #include <rosbag/view.h>
@@ -36,6 +51,7 @@
 #include <std_msgs/Header.h>
 #include <sensor_msgs/CompressedImage.h>
 #include <sensor_msgs/Image.h>
+#include <sensor_msgs/CameraInfo.h>
 #include <tf2_msgs/TFMessage.h>
 
 #include <chrono>
@@ -54,16 +70,38 @@
 #include "fisheye_mapping/FrameDone.h"
 #include "fisheye_mapping/core/sync/frame_pacer.h"
 #include "fisheye_mapping/core/camera/rig.h"
+#include "fisheye_mapping/ros/camera_info.h"
 
 namespace fm = fisheye_mapping;
 
 namespace {
 
-// The header stamp of an image message (raw or compressed); NaN otherwise.
-double imageStamp(const rosbag::MessageInstance& m) {
-  if (auto img = m.instantiate<sensor_msgs::Image>()) return img->header.stamp.toSec();
-  if (auto img = m.instantiate<sensor_msgs::CompressedImage>()) return img->header.stamp.toSec();
-  return NAN;
+// An image message's header (raw or compressed) and, for a raw image, its
+// size; false for any other type.
+struct ImageHeader {
+  std_msgs::Header header;
+  int width = -1, height = -1;  // -1: compressed (not decoded here)
+};
+bool imageHeader(const rosbag::MessageInstance& m, ImageHeader* out) {
+  if (auto img = m.instantiate<sensor_msgs::Image>()) {
+    out->header = img->header;
+    out->width = int(img->width);
+    out->height = int(img->height);
+    return true;
+  }
+  if (auto img = m.instantiate<sensor_msgs::CompressedImage>()) {
+    out->header = img->header;
+    out->width = out->height = -1;
+    return true;
+  }
+  return false;
+}
+
+// image_transport's CameraInfo topic of an image topic: its namespace +
+// "/camera_info" (/cam0/image_raw -> /cam0/camera_info).
+std::string cameraInfoTopic(const std::string& image_topic) {
+  const auto slash = image_topic.rfind('/');
+  return slash == std::string::npos ? "camera_info" : image_topic.substr(0, slash) + "/camera_info";
 }
 
 const char* kUsage =
@@ -80,7 +118,10 @@ const char* kUsage =
     "  ~start             seconds into the bag to begin (default 0)\n"
     "  ~require_tf        the bag must hold /tf (default true)\n"
     "  ~summary_file      YAML with the counts, written at the end (optional)\n"
-    "  ~hold              after the drive, keep publishing the last poses (default true)\n"
+    "  ~hold              after the drive, keep running: the clock goes on and the last poses\n"
+    "                     are published again, stamped with it (default true)\n"
+    "  ~publish_camera_info  publish each camera's CameraInfo from the camchain on\n"
+    "                     <image namespace>/camera_info with each image (default false)\n"
     "Exit status: 0 played to the end, 1 bad input, 2 bad parameters.\n";
 
 struct Done {
@@ -115,7 +156,7 @@ int main(int argc, char** argv) {
   std::string bag_path, camchain, mount, reference_topic, done_topic = "/fusion_done", summary_file;
   std::vector<std::string> image_topics;
   double timeout = 120.0, wait_subscribers = 120.0, start = 0.0;
-  bool require_tf = true, hold = true;
+  bool require_tf = true, hold = true, publish_camera_info = false;
   pnh.getParam("bag", bag_path);
   pnh.getParam("camchain", camchain);
   pnh.getParam("mount", mount);
@@ -128,6 +169,7 @@ int main(int argc, char** argv) {
   pnh.getParam("require_tf", require_tf);
   pnh.getParam("summary_file", summary_file);
   pnh.getParam("hold", hold);
+  pnh.getParam("publish_camera_info", publish_camera_info);
   if (bag_path.empty()) {
     ROS_FATAL("paced_player: parameter ~bag (the rosbag to play) is required");
     return 2;
@@ -154,15 +196,32 @@ int main(int argc, char** argv) {
     ROS_FATAL("paced_player: cannot read the bag %s: %s", bag_path.c_str(), e.what());
     return 1;
   }
-  if (image_topics.empty()) {
+  if (publish_camera_info && (camchain.empty() || mount.empty())) {
+    ROS_FATAL("paced_player: ~publish_camera_info needs ~camchain and ~mount (the cameras' intrinsics)");
+    return 2;
+  }
+  // With ~publish_camera_info: the rig camera of each image topic (the
+  // camchain's rostopic; with ~image_topics, the camera at the same index).
+  std::map<std::string, fm::RigCamera> topic_camera;
+  if (image_topics.empty() || publish_camera_info) {
     if (camchain.empty() || mount.empty()) {
       ROS_FATAL("paced_player: give ~camchain and ~mount (the cameras' rostopic fields) or ~image_topics");
       return 2;
     }
     try {
-      for (const auto& c : fm::loadKalibrRig(camchain, mount).cameras) {
-        if (c.rostopic.empty()) throw std::runtime_error("camera " + c.name + " has no rostopic field");
-        image_topics.push_back(c.rostopic);
+      const fm::Rig rig = fm::loadKalibrRig(camchain, mount);
+      const bool from_rig = image_topics.empty();
+      if (!from_rig && image_topics.size() != rig.cameras.size()) {
+        throw std::runtime_error("~image_topics has " + std::to_string(image_topics.size()) + " topics for " +
+                                 std::to_string(rig.cameras.size()) + " cameras");
+      }
+      for (std::size_t i = 0; i < rig.cameras.size(); ++i) {
+        const fm::RigCamera& c = rig.cameras[i];
+        if (from_rig) {
+          if (c.rostopic.empty()) throw std::runtime_error("camera " + c.name + " has no rostopic field");
+          image_topics.push_back(c.rostopic);
+        }
+        topic_camera[image_topics[i]] = c;
       }
     } catch (const std::exception& e) {
       ROS_FATAL("paced_player: rig %s: %s", camchain.c_str(), e.what());
@@ -189,6 +248,7 @@ int main(int argc, char** argv) {
   for (auto& t : image_topics) {
     if (bag_topics.count(t) || !bag_topics.count(t + "/compressed")) continue;
     if (reference_topic == t) reference_topic += "/compressed";
+    if (topic_camera.count(t)) topic_camera[t + "/compressed"] = topic_camera[t];
     t += "/compressed";
   }
   std::unique_ptr<fm::FramePacer> pacer;
@@ -212,6 +272,37 @@ int main(int argc, char** argv) {
     return 1;
   }
 
+  // ~publish_camera_info: one CameraInfo per camera, on the base topic's
+  // namespace (a compressed topic's base: the topic without /compressed).
+  struct InfoOut {
+    std::string topic;
+    sensor_msgs::CameraInfo info;
+    int width = 0, height = 0;
+  };
+  std::map<std::string, InfoOut> info_out;  // image topic (as played) -> its CameraInfo
+  if (publish_camera_info) {
+    for (const auto& t : image_topics) {
+      // A topic renamed to <base>/compressed above keeps its base's camera.
+      const std::string suffix = "/compressed";
+      const bool renamed = t.size() > suffix.size() && t.compare(t.size() - suffix.size(), suffix.size(), suffix) == 0 &&
+                           topic_camera.count(t.substr(0, t.size() - suffix.size())) > 0;
+      const std::string base = renamed ? t.substr(0, t.size() - suffix.size()) : t;
+      const fm::RigCamera& cam = topic_camera.at(t);
+      InfoOut o;
+      o.topic = cameraInfoTopic(base);
+      o.info = fm::toCameraInfo(cam, ros::Time());
+      o.width = cam.model.width();
+      o.height = cam.model.height();
+      if (bag_topics.count(o.topic)) {
+        ROS_FATAL("paced_player: ~publish_camera_info: the bag %s already has %s (CameraInfo of %s); set "
+                  "~publish_camera_info false to use the bag's",
+                  bag_path.c_str(), o.topic.c_str(), t.c_str());
+        return 2;
+      }
+      info_out[t] = o;
+    }
+  }
+
   Done done;
   ros::Subscriber done_sub = nh.subscribe<fm::FrameDone>(done_topic, 100, [&](const fm::FrameDone::ConstPtr& msg) {
     std::lock_guard<std::mutex> lock(done.mutex);
@@ -233,6 +324,11 @@ int main(int argc, char** argv) {
     opts.latch = c->topic == "/tf_static";
     pubs[c->topic] = nh.advertise(opts);
   }
+  std::map<std::string, ros::Publisher> info_pubs;  // CameraInfo topic -> publisher
+  for (const auto& [image_topic, o] : info_out) {
+    if (!info_pubs.count(o.topic)) info_pubs[o.topic] = nh.advertise<sensor_msgs::CameraInfo>(o.topic, 100);
+  }
+  if (!info_out.empty()) ROS_INFO("paced_player: publishing the camchain's CameraInfo of %zu cameras", info_out.size());
 
   // Wait until the pipeline listens: every image topic subscribed, and the
   // fusion stage's done topic published.
@@ -254,6 +350,48 @@ int main(int argc, char** argv) {
   }
   ros::WallDuration(0.5).sleep();  // connections settle
 
+  // ~publish_camera_info: a pipeline with rig_source camera_info builds its
+  // rig from the first CameraInfo of every camera and tf (FrameSync tries
+  // every 0.5 s, then unsubscribes) and drops the frame sets before that,
+  // which would leave the player waiting ~timeout for the first one. So the
+  // bag's /tf_static and each camera's CameraInfo (the first image's stamp
+  // and frame_id) go out first, again every 0.25 s until nothing subscribes
+  // to the CameraInfo topics any more (the rig is built) or 3 s have passed.
+  if (!info_out.empty()) {
+    rosbag::View statics(bag, rosbag::TopicQuery("/tf_static"));
+    for (const rosbag::MessageInstance& m : statics) {
+      if (pubs.count("/tf_static")) pubs["/tf_static"].publish(m);
+    }
+    std::map<std::string, sensor_msgs::CameraInfo> primer;  // CameraInfo topic -> message
+    for (const auto& [image_topic, o] : info_out) {
+      rosbag::View first(bag, rosbag::TopicQuery(image_topic), begin);
+      for (const rosbag::MessageInstance& m : first) {
+        ImageHeader h;
+        if (!imageHeader(m, &h)) break;
+        sensor_msgs::CameraInfo info = o.info;
+        info.header.stamp = h.header.stamp;
+        if (!h.header.frame_id.empty()) info.header.frame_id = h.header.frame_id;
+        primer[o.topic] = info;
+        break;
+      }
+    }
+    const auto t_primer = std::chrono::steady_clock::now();
+    for (int round = 0; ros::ok(); ++round) {
+      for (const auto& [topic, info] : primer) info_pubs[topic].publish(info);
+      bool listened = false;
+      for (const auto& [topic, pub] : info_pubs) listened = listened || pub.getNumSubscribers() > 0;
+      const double waited = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_primer).count();
+      if (!listened || waited > 3.0) {
+        if (round > 0) {
+          ROS_INFO("paced_player: CameraInfo published for %.2f s before the drive%s", waited,
+                   listened ? " (still subscribed: going on)" : " (the rig is built)");
+        }
+        break;
+      }
+      ros::WallDuration(0.25).sleep();
+    }
+  }
+
   int timed_out = 0, bad_input = 0;
   std::vector<double> played;
   auto waitFor = [&](double stamp) {
@@ -269,14 +407,25 @@ int main(int argc, char** argv) {
   const auto t0 = std::chrono::steady_clock::now();
   int last_progress = -1;
   std::map<std::string, geometry_msgs::TransformStamped> last_pose;  // child frame -> latest /tf
-  ros::Time last_clock;
+  ros::Time last_clock, last_tf_stamp;
   const double duration = (view.getEndTime() - begin).toSec();
   for (const rosbag::MessageInstance& m : play) {
     if (!ros::ok()) break;
     const std::string& topic = m.getTopic();
-    const double stamp = pacer->isImageTopic(topic) ? imageStamp(m) : 0.0;
-    if (std::isnan(stamp)) {
+    const bool is_image = pacer->isImageTopic(topic);
+    ImageHeader image;
+    if (is_image && !imageHeader(m, &image)) {
       ROS_ERROR("paced_player: %s is not a sensor_msgs/Image or CompressedImage topic; stopping", topic.c_str());
+      bad_input = 1;
+      break;
+    }
+    const double stamp = is_image ? image.header.stamp.toSec() : 0.0;
+    const auto info_it = is_image ? info_out.find(topic) : info_out.end();
+    if (info_it != info_out.end() && image.width >= 0 &&
+        (image.width != info_it->second.width || image.height != info_it->second.height)) {
+      ROS_ERROR("paced_player: ~publish_camera_info: an image on %s is %dx%d, its camera in %s is %dx%d; stopping",
+                topic.c_str(), image.width, image.height, camchain.c_str(), info_it->second.width,
+                info_it->second.height);
       bad_input = 1;
       break;
     }
@@ -292,10 +441,20 @@ int main(int argc, char** argv) {
     clock.clock = m.getTime();
     clock_pub.publish(clock);
     last_clock = clock.clock;
+    if (info_it != info_out.end()) {
+      // The CameraInfo first: a subscriber pairing the two finds it there.
+      sensor_msgs::CameraInfo info = info_it->second.info;
+      info.header.stamp = image.header.stamp;
+      if (!image.header.frame_id.empty()) info.header.frame_id = image.header.frame_id;
+      info_pubs[info_it->second.topic].publish(info);
+    }
     pubs[topic].publish(m);
     if (hold && topic == "/tf") {
       if (auto tf = m.instantiate<tf2_msgs::TFMessage>()) {
-        for (const auto& t : tf->transforms) last_pose[t.child_frame_id] = t;
+        for (const auto& t : tf->transforms) {
+          last_pose[t.child_frame_id] = t;
+          last_tf_stamp = std::max(last_tf_stamp, t.header.stamp);
+        }
       }
     }
     const int progress = static_cast<int>(100.0 * (m.getTime() - begin).toSec() / std::max(duration, 1e-9));
@@ -335,20 +494,33 @@ int main(int argc, char** argv) {
       bad_input = 1;
     }
   }
-  // Hold the last poses (rviz started after the drive still finds the frames).
-  if (hold && !last_pose.empty()) {
-    ROS_INFO("paced_player: holding the last pose of %zu frames until shut down", last_pose.size());
+  // Hold: the clock goes on at wall-clock speed from the last stamp played
+  // (clock or pose, whichever is later) and the last poses are published
+  // again with each new clock, so that rviz started after the drive still
+  // finds the frames. Every held stamp is later than any before it: tf2 drops
+  // a pose whose stamp it already has (TF_REPEATED_DATA, logged each time).
+  // After bad input the player exits (status 1) instead: vehicle.launch
+  // marks it required, so the launch ends and the TSDF stage saves its map.
+  if (hold && !bad_input && ros::ok()) {
+    ROS_INFO("paced_player: drive over; holding the last pose of %zu frames (clock going on) until shut down",
+             last_pose.size());
+    const ros::Duration step(0.5);
+    ros::Time held = std::max(last_clock, last_tf_stamp);
     while (ros::ok()) {
-      tf2_msgs::TFMessage msg;
-      for (auto& [child, t] : last_pose) {
-        t.header.stamp = last_clock;
-        msg.transforms.push_back(t);
-      }
+      ros::WallDuration(step.toSec()).sleep();
+      if (!ros::ok()) break;
+      held += step;
       rosgraph_msgs::Clock clock;
-      clock.clock = last_clock;
+      clock.clock = held;
       clock_pub.publish(clock);
-      pubs["/tf"].publish(msg);
-      ros::WallDuration(0.5).sleep();
+      if (!last_pose.empty() && pubs.count("/tf")) {
+        tf2_msgs::TFMessage msg;
+        for (auto& [child, t] : last_pose) {
+          t.header.stamp = held;
+          msg.transforms.push_back(t);
+        }
+        pubs["/tf"].publish(msg);
+      }
     }
   }
   spinner.stop();
