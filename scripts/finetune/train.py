@@ -2,7 +2,8 @@
 
 Step 1 trains only the first conv and the head's last 1x1 convs (whose class rows are
 replaced by the dataset's classes); step 2 trains every layer. After each epoch: validation
-precision / recall / AP on a held-out folder, an atomic checkpoint (tmp + rename), an ONNX
+precision / recall / AP on a held-out folder (with --val-every N: every N-th epoch and each
+step's last), an atomic checkpoint (tmp + rename), an ONNX
 export checked to load in OpenCV's dnn and renamed into place, and the training curve PNG.
 An interrupted run therefore leaves the last good checkpoint and a model that loads.
 """
