@@ -2,7 +2,8 @@
 
 Step 1 trains only the first conv and the head's last 1x1 convs (whose class rows are
 replaced by the dataset's classes); step 2 trains every layer. After each epoch: validation
-precision / recall / AP on a held-out folder, an atomic checkpoint (tmp + rename), an ONNX
+precision / recall / AP on a held-out folder (with --val-every N: every N-th epoch and each
+step's last), an atomic checkpoint (tmp + rename), an ONNX
 export checked to load in OpenCV's dnn and renamed into place, and the training curve PNG.
 An interrupted run therefore leaves the last good checkpoint and a model that loads.
 """
@@ -80,6 +81,9 @@ def parse_args(argv):
     p.add_argument("--max-val-images", type=int, default=40, help="validation images used (default 40; 0: all)")
     p.add_argument("--keep-empty", action="store_true",
                    help="use images with empty label files as background-only frames (default: skip them)")
+    p.add_argument("--val-every", type=int, default=1,
+                   help="validate after every N-th epoch and after each step's last one (default 1: every "
+                        "epoch); validation does not change the weights, it only costs time")
     p.add_argument("--score-threshold", type=float, default=0.3, help="validation score threshold (default 0.3)")
     p.add_argument("--min-height", type=float, default=24.0,
                    help="validation: boxes shorter than this (image pixels) are ignored (default 24)")
@@ -89,9 +93,9 @@ def parse_args(argv):
     p.add_argument("--max-minutes", type=float, default=0,
                    help="stop cleanly (checkpoint + model kept) after this many minutes (default: no limit)")
     a = p.parse_args(argv)
-    for k in ("epochs1", "epochs2", "batch"):
-        if getattr(a, k) < (1 if k == "batch" else 0):
-            p.error(f"--{k} must be positive, got {getattr(a, k)}")
+    for k in ("epochs1", "epochs2", "batch", "val_every"):
+        if getattr(a, k) < (1 if k in ("batch", "val_every") else 0):
+            p.error(f"--{k.replace('_', '-')} must be positive, got {getattr(a, k)}")
     return a
 
 
@@ -207,13 +211,14 @@ def plot_curve(path, history):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     ep = [h["epoch_total"] for h in history]
+    val = [h for h in history if h.get("precision") is not None]  # --val-every: validated epochs only
     fig, ax = plt.subplots(1, 2, figsize=(10, 4))
     ax[0].plot(ep, [h["loss"] for h in history], "o-", label="train loss")
     ax[0].set_xlabel("epoch")
     ax[0].set_ylabel("GFL loss")
     ax[0].legend()
     for k in ("precision", "recall", "ap"):
-        ax[1].plot(ep, [h[k] for h in history], "o-", label=k)
+        ax[1].plot([h["epoch_total"] for h in val], [h[k] for h in val], "o-", label=k)
     ax[1].set_xlabel("epoch")
     ax[1].set_ylim(0, 1.02)
     ax[1].legend()
@@ -351,13 +356,22 @@ def main(argv):
                         raise Interrupted(f"--max-minutes {args.max_minutes}")
                 if stop:
                     raise Interrupted(stop[0])
-                v = validate(net, points, val, args)
+                # Validation only every --val-every epochs and at the end of each step; the
+                # weights are the same either way (it draws no random numbers).
+                if (epoch + 1) % args.val_every == 0 or epoch + 1 == epochs:
+                    v = validate(net, points, val, args)
+                else:
+                    v = {k: None for k in ("precision", "recall", "ap", "tp", "fp", "gt")}
                 h = {"step": step, "epoch": epoch, "epoch_total": len(history) + 1, "loss": float(np.mean(losses)),
                      "seconds": time.time() - t0, **v}
                 history.append(h)
-                print(f"step {step} epoch {epoch + 1}/{epochs}: loss {h['loss']:.3f}  val precision "
-                      f"{v['precision']:.3f} recall {v['recall']:.3f} AP50 {v['ap']:.3f} "
-                      f"(TP {v['tp']} FP {v['fp']} of {v['gt']})  {h['seconds']:.0f} s", flush=True)
+                if v["precision"] is None:
+                    print(f"step {step} epoch {epoch + 1}/{epochs}: loss {h['loss']:.3f}  (not validated: "
+                          f"--val-every {args.val_every})  {h['seconds']:.0f} s", flush=True)
+                else:
+                    print(f"step {step} epoch {epoch + 1}/{epochs}: loss {h['loss']:.3f}  val precision "
+                          f"{v['precision']:.3f} recall {v['recall']:.3f} AP50 {v['ap']:.3f} "
+                          f"(TP {v['tp']} FP {v['fp']} of {v['gt']})  {h['seconds']:.0f} s", flush=True)
                 ck = {"model": net.state_dict(), "optim": opt.state_dict(), "step": step, "epoch": epoch,
                       "history": history, "classes": classes, "input_size": [nw, nh]}
                 atomic_write(paths["ckpt"], lambda t: torch.save(ck, t))
