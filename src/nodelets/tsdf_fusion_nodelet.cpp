@@ -499,7 +499,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     try {
       const cv::Mat grey = toCvImageShare(msg, ImageTarget::kGrey8, getNodeHandle().resolveName("image"));
       std::lock_guard<std::mutex> lock(image_mutex_);
-      images_.push_back({msg->header.stamp, msg->header.frame_id, grey});
+      images_.push_back({msg->header.stamp, msg->header.frame_id, grey, msg});
       while (images_.size() > 8) images_.pop_front();
     } catch (const std::exception& e) {
       ++image_errors_;
@@ -518,7 +518,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
                               it->grey.cols, it->grey.rows, model.width(), model.height());
         return cv::Mat();
       }
-      return it->grey;
+      return it->grey.clone();  // the entry (and its message) may go before the frame is fused
     }
     return cv::Mat();
   }
@@ -746,6 +746,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     ros::Time stamp;
     std::string frame;
     cv::Mat grey;
+    sensor_msgs::ImageConstPtr msg;  // keeps the pixels alive: grey may share them
   };
   std::mutex image_mutex_;
   std::deque<StampedGrey> images_;  // image_mutex_
