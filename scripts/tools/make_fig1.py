@@ -7,14 +7,15 @@ e.g. the fused grey intensity) or a plain grey where it has none, Lambert
 shaded from the vertex normals.
 
 usage: make_fig1.py --frame-dir DIR --mesh MESH.ply --out fig1.png
-                    [--trajectory poses.csv] [--panel-width 900] [--title TEXT]
+                    [--panel-width 900] [--title TEXT]
        make_fig1.py --mesh MESH.ply --render-only OUT.png [--width W --height H]
 
 DIR holds frame_image.png, frame_depth.png and frame_detections.png (written
 mid-drive by scripts/tools/grab_frame.py from the running pipeline's topics)
 and frame.txt. The renderer is numpy + OpenCV only (a z-buffer over points
 sampled on every triangle; no OpenGL, so it works headless anywhere); the
-view looks along the map's main horizontal axis from behind and above.
+view looks along the principal horizontal axis of the mesh's vertices (the street)
+from behind, above and a little to the side.
 """
 import argparse
 import os
@@ -149,7 +150,9 @@ def default_view(verts, trajectory=None):
     proj = d @ axis
     length = np.percentile(proj, 98) - np.percentile(proj, 2)
     target = np.array([centre_xy[0], centre_xy[1], ground])
-    eye = target - np.r_[axis, 0] * (0.62 * length) + np.array([0, 0, 0.42 * length])
+    # a little to one side, so that the facades of that side are seen at an angle, not edge-on
+    side = np.array([-axis[1], axis[0], 0.0])
+    eye = target - np.r_[axis, 0] * (0.55 * length) + side * (0.22 * length) + np.array([0, 0, 0.42 * length])
     return eye, target
 
 
