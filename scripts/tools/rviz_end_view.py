@@ -32,13 +32,23 @@ def lookup_end(frames, timeout=10.0):
     except ImportError:
         return None
     world, base = frames.split(",")
+    import time
     rospy.init_node("rviz_end_view", anonymous=True, disable_signals=True)
     buf = tf2_ros.Buffer()
     tf2_ros.TransformListener(buf)
-    try:
-        t = buf.lookup_transform(world, base, rospy.Time(0), rospy.Duration(timeout))
-    except Exception as e:  # noqa: BLE001 (any tf failure: fall back)
-        print(f"rviz_end_view: no {world} -> {base} transform ({e}); eye on the map's axis", file=sys.stderr)
+    # Wall-clock deadline: under use_sim_time the clock stops with the drive,
+    # so a ROS-time timeout would never expire.
+    deadline = time.time() + timeout
+    t = None
+    while time.time() < deadline:
+        try:
+            t = buf.lookup_transform(world, base, rospy.Time(0))
+            break
+        except Exception:  # noqa: BLE001 (not there yet)
+            time.sleep(0.2)
+    if t is None:
+        print(f"rviz_end_view: no {world} -> {base} transform within {timeout:.0f} s; eye on the map's axis",
+              file=sys.stderr)
         return None
     return np.array([t.transform.translation.x, t.transform.translation.y])
 
@@ -93,3 +103,5 @@ def main():
 
 if __name__ == "__main__":
     main()
+    sys.stdout.flush()
+    os._exit(0)   # rospy's threads (with --tf) would keep the process alive
