@@ -152,7 +152,7 @@ def default_view(verts, trajectory=None):
     target = np.array([centre_xy[0], centre_xy[1], ground])
     # a little to one side, so that the facades of that side are seen at an angle, not edge-on
     side = np.array([-axis[1], axis[0], 0.0])
-    eye = target - np.r_[axis, 0] * (0.55 * length) + side * (0.22 * length) + np.array([0, 0, 0.42 * length])
+    eye = target - np.r_[axis, 0] * (0.45 * length) + side * (0.30 * length) + np.array([0, 0, 0.22 * length])
     return eye, target
 
 
