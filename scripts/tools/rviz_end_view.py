@@ -5,7 +5,7 @@ the middle of the map, the eye above and beyond the car's last position (the
 end of the drive), looking back towards the start, far enough to see it all.
 
 usage: rviz_end_view.py --cloud cloud.pcd --template rviz/vehicle_end.rviz --out OUT.rviz
-                        [--end X,Y] [--tf map,base_link] [--pitch 0.75]
+                        [--end X,Y] [--tf map,base_link] [--pitch 0.8]
 
 --end   the car's last position in the map frame; --tf looks it up from tf
         instead (a running ROS master, e.g. the demo's paced player holding
@@ -60,7 +60,7 @@ def main():
     ap.add_argument("--out", required=True)
     ap.add_argument("--end")
     ap.add_argument("--tf")
-    ap.add_argument("--pitch", type=float, default=0.75)
+    ap.add_argument("--pitch", type=float, default=0.8)
     args = ap.parse_args()
     pts = read_pcd(args.cloud)
     pts = pts[np.isfinite(pts).all(1)]
@@ -85,8 +85,10 @@ def main():
     side = float(np.percentile(np.abs(d @ np.array([-axis[1], axis[0]])), 99))
     # distance so that the map's length fits the 0.785 rad field of view, seen at the pitch
     span = max(length, 1.6 * 2 * side, 20.0)
-    distance = 0.5 * span / math.tan(0.785 / 2) * 0.95
-    yaw = math.atan2(axis[1], axis[0])
+    # (seen at the pitch, the length is foreshortened: 0.65 of the distance that fits it face-on)
+    distance = 0.5 * span / math.tan(0.785 / 2) * 0.65
+    # a little to one side of the axis, so that the facades of one side are seen at an angle
+    yaw = math.atan2(axis[1], axis[0]) + 0.45
     s = open(args.template).read()
     view = s[s.index("    Current:\n"):s.index("    Saved:")]
     new = view
