@@ -44,6 +44,11 @@ fm_build() {
   local lock rc=0
   exec {lock}>"$FM_WS/.build_$variant.lock"
   flock "$lock"
+  # catkin snapshots the devel space's environment (build_*/catkin_generated/
+  # setup_cached.sh, what `make run_tests` runs under) at the first configure,
+  # and puts the Python path of the package's own messages on PYTHONPATH only if
+  # the folder exists then: make it first, so rostopic in the tests loads them.
+  mkdir -p "$FM_WS/devel_$variant/lib/python3/dist-packages"
   # ROS's setup scripts read unset variables.
   set +u
   catkin_make -C "$FM_WS" --build "$FM_WS/build_$variant" \
