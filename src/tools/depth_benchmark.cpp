@@ -223,18 +223,22 @@ int main(int argc, char** argv) {
       // is its own.
       const double peak = (backend == "opencl" && cl_is_gpu) ? cl_peak : std::max(cpu_peak, cl_peak);
       // The three scales without and with filters, then multi-scale filtered
-      // with every plane swept at every pixel (skip_work off).
-      std::vector<std::tuple<std::string, bool, bool>> runs;
+      // with every plane swept at every pixel (skip_work off), and without
+      // the infinity filter (what its cost at infinity costs).
+      std::vector<std::tuple<std::string, bool, bool, bool>> runs;
       std::vector<std::string> scales;
       {
         std::stringstream ss(a.count("scales") ? a["scales"] : "full,half,multiscale");
         for (std::string sc; std::getline(ss, sc, ',');) scales.push_back(sc);
       }
       for (const std::string& res : scales) {
-        for (const bool filters : {false, true}) runs.emplace_back(res, filters, true);
+        for (const bool filters : {false, true}) runs.emplace_back(res, filters, true, filters);
       }
-      if (std::count(scales.begin(), scales.end(), "multiscale")) runs.emplace_back("multiscale", true, false);
-      for (const auto& [res, filters, skip] : runs) {
+      if (std::count(scales.begin(), scales.end(), "multiscale")) {
+        runs.emplace_back("multiscale", true, false, true);
+        runs.emplace_back("multiscale", true, true, false);
+      }
+      for (const auto& [res, filters, skip, infinity] : runs) {
         fm::PlaneSweepConfig c;
         c.backend = fm::parseSweepBackend(backend);
         c.resolution = fm::parseSweepResolution(res);
@@ -242,6 +246,7 @@ int main(int argc, char** argv) {
         c.skip_work = skip;
         if (band_rows > 0) c.band_rows = band_rows;
         if (!filters) c.filters.cost = c.filters.uniqueness = c.filters.consistency = false;
+        c.filters.infinity = infinity;
         fm::PlaneSweep sweep(c);
         fm::DepthResult r = sweep.compute(ref, supports, &T_base_ref);  // warm-up: kernel builds, buffers
         std::vector<double> ms;
@@ -256,9 +261,10 @@ int main(int argc, char** argv) {
           pixels = (W / 2) * (H / 2) + std::round(c.crop_width * W) * std::round(c.crop_height * H);
         // The work done: the pairs swept, not those skipped.
         const double gflop = kFlopsPerSample * pixels * planes * r.swept_share * r.used_views.size() / 1e9;
-        ms_of[backend + ":" + res + (filters ? "+f" : "") + (skip ? "" : ":every")] = med;
+ ms_of[backend + ":" + res + (filters ? "+f" : "") + (skip ? "" : ":every") + (filters && !infinity ? ":noinf" : "")] =
+            med;
         std::cout << "| " << sweep.backendName() << " | " << res << (skip ? "" : ", every plane everywhere") << " | "
-                  << (filters ? "on" : "off") << " | " << std::setprecision(0) << med << " | "
+                  << (filters ? (infinity ? "on" : "on, no infinity filter") : "off") << " | " << std::setprecision(0) << med << " | "
                   << r.used_views.size() << " | " << std::setprecision(1) << 100.0 * r.swept_share << " % | "
                   << (peak > 0 ? 100.0 * gflop / (med / 1e3) / peak : 0.0) << " % |\n";
       }
@@ -274,6 +280,10 @@ int main(int argc, char** argv) {
       if (ms_of.count(b + "multiscale+f:every")) {
         std::cout << backend << ": less work: every plane everywhere / as the stage runs (multi-scale filtered): "
                   << std::setprecision(2) << ms_of[b + "multiscale+f:every"] / ms_of[b + "multiscale+f"] << "\n";
+      }
+      if (ms_of.count(b + "multiscale+f:noinf")) {
+        std::cout << backend << ": the infinity filter's cost: with / without (multi-scale filtered): "
+                  << std::setprecision(2) << ms_of[b + "multiscale+f"] / ms_of[b + "multiscale+f:noinf"] << "\n";
       }
     }
     // The last line: the first backend listed (the product's on this machine).

@@ -61,7 +61,7 @@ const char* kUsage =
     "usage: depth_eval synthetic --camchain F --mount F --out DIR [--preset urban|forest] [--seed N]\n"
     "                  [--frames N] [--start S] [--step S] [--backend auto|native|opencl|cpu] [--device D]\n"
     "                  [--max-range M] [--realistic] [--sweep-camchain F] [--every-plane]\n"
-    "                  [--wall-planes N]\n"
+    "                  [--wall-planes N] [--cloudy-sky]\n"
     "       depth_eval vcharge --data DIR --camera left|right --out DIR [--device D] [--ground-z Z]\n"
     "                  [--label TEXT]\n"
     "       depth_eval vcharge-check --data DIR --camera left|right --depth-k F --depth-k1 F --out DIR\n"
@@ -78,6 +78,7 @@ const char* kUsage =
     "    --every-plane     sweep every plane at every pixel (no skipped work, no coarse-to-fine\n"
     "                      search): the reference for what the stage's less work costs\n"
     "    --wall-planes N   wall planes on each side (plane_sweep wall_planes; default the sweep's)\n"
+    "    --cloudy-sky      an overcast sky as contrasted as a real one (make_drive --cloudy-sky)\n"
     "  vcharge: motion stereo on the V-Charge sequence in --data, checked without ground truth\n"
     "    --ground-z Z      nominal ground height in the system frame   --label TEXT  CSV code column\n"
     "  vcharge-check: the same checks on saved depth TIFFs of frames K (--k, default 2) and K+1\n"
@@ -88,12 +89,12 @@ const char* kUsage =
   std::exit(2);
 }
 
-// The options of each mode (without "--"); all take a value but --realistic
-// and --every-plane.
+// The options of each mode (without "--"); all take a value but --realistic,
+// --every-plane and --cloudy-sky.
 const std::map<std::string, std::set<std::string>> kModeOptions = {
     {"synthetic",
      {"camchain", "mount", "out", "preset", "seed", "frames", "start", "step", "backend", "device", "max-range",
-      "realistic", "sweep-camchain", "every-plane", "wall-planes"}},
+      "realistic", "sweep-camchain", "every-plane", "wall-planes", "cloudy-sky"}},
     {"vcharge", {"data", "camera", "out", "device", "ground-z", "label"}},
     {"vcharge-check", {"data", "camera", "depth-k", "depth-k1", "out", "k", "ground-z", "label"}},
 };
@@ -103,7 +104,7 @@ std::map<std::string, std::string> parseArgs(const std::set<std::string>& known,
   fisheye_mapping::cli::forEachOption(argc, argv, first,
                                       [&](const std::string& k, const fisheye_mapping::cli::NextValue& next) {
                                         if (k.rfind("--", 0) != 0 || !known.count(k.substr(2))) return false;
-                                        a[k.substr(2)] = (k == "--realistic" || k == "--every-plane") ? "true" : next();
+                                        a[k.substr(2)] = (k == "--realistic" || k == "--every-plane" || k == "--cloudy-sky") ? "true" : next();
                                         return true;
                                       });
   return a;
@@ -173,6 +174,10 @@ int runSynthetic(const std::map<std::string, std::string>& a) {
   wc.route_length = wc.speed * (start + step * frames) + 80;
   wc.asphalt_grain = realism.asphalt_grain;
   wc.clouds = realism.clouds;
+  if (a.count("cloudy-sky")) {
+    wc.overcast = true;
+    wc.clouds = fm::synth::WorldConfig::kOvercastClouds;
+  }
   const fm::synth::World world(wc);
   const int n_cams = static_cast<int>(rig.cameras.size());
   const auto sensors = fm::synth::drawSensors(realism.sensors, n_cams, wc.seed);

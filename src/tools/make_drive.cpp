@@ -80,6 +80,9 @@ const char* kUsage =
     "  --blur PX                   optical blur, Gaussian sigma in pixels (default 0)\n"
     "  --asphalt-grain A           pixel-scale grain of the asphalt, albedo amplitude (default 0)\n"
     "  --clouds A                  low-contrast clouds, intensity amplitude (default 0)\n"
+    "  --cloudy-sky                an overcast sky as contrasted as a real one: detailed\n"
+    "                              clouds with soft edges, amplitude 0.3 (--clouds after it\n"
+    "                              sets another)\n"
     "  --knock CAM:DEG@S           camera CAM (a supporting camera's index) is knocked at S\n"
     "                              seconds of drive: its true rotation turns by DEG degrees\n"
     "                              (about the axis (1, 1, 0)/sqrt 2 of its frame); the\n"
@@ -101,6 +104,7 @@ struct Options {
   double duration = 20, rate = 10, speed = 8, jitter_ms = 0, drop = 0, pose_noise = 0;
   int moving = 6;
   double calib_rot_deg = 0, calib_trans_mm = 0, grain = 0, clouds = 0;
+  bool overcast = false;
   int knock_camera = -1;  // none
   double knock_deg = 0, knock_at = 0;
   fm::synth::SensorSpread sensors;
@@ -176,7 +180,10 @@ Options parse(int argc, char** argv) {
       else if (a == "--blur") o.sensors.base.blur_px = number(a, next());
       else if (a == "--asphalt-grain") o.grain = number(a, next());
       else if (a == "--clouds") o.clouds = number(a, next());
-      else if (a == "--knock") {
+      else if (a == "--cloudy-sky") {
+        o.overcast = true;
+        o.clouds = fm::synth::WorldConfig::kOvercastClouds;
+      } else if (a == "--knock") {
         const std::string v = next();
         const size_t colon = v.find(':'), at = v.find('@');
         if (colon == std::string::npos || at == std::string::npos || at < colon)
@@ -316,6 +323,7 @@ int main(int argc, char** argv) {
     wc.route_length = opt.speed * opt.duration + 60;
     wc.asphalt_grain = opt.grain;
     wc.clouds = opt.clouds;
+    wc.overcast = opt.overcast;
     const fm::synth::World world(wc);
     const int n_cams = static_cast<int>(rig.cameras.size());
     const std::vector<fm::synth::SensorModel> sensors = fm::synth::drawSensors(opt.sensors, n_cams, opt.seed);
@@ -371,7 +379,7 @@ int main(int argc, char** argv) {
       w << "# make_drive: the synthetic world of this drive (fisheye_mapping::synth::WorldConfig)\n"
         << "preset: " << wc.preset << "\nseed: " << wc.seed << "\nspeed: " << wc.speed
         << "\nmoving_vehicles: " << wc.moving_vehicles << "\nroute_length: " << wc.route_length
-        << "\nasphalt_grain: " << wc.asphalt_grain << "\nclouds: " << wc.clouds << "\nduration: " << opt.duration
+        << "\nasphalt_grain: " << wc.asphalt_grain << "\nclouds: " << wc.clouds << "\novercast: " << (wc.overcast ? "true" : "false") << "\nduration: " << opt.duration
         << "\n";
       if (!w) throw std::runtime_error("cannot write " + opt.out + "/world.yaml");
     }

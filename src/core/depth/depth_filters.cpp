@@ -1,6 +1,6 @@
 // The depth filters of the plane sweep (Cui et al. 2019, Sec. III-A): the
 // image noise estimate, textureless regions, and the cost, uniqueness,
-// texture and consistency filters applied to raw depth.
+// texture, infinity and consistency filters applied to raw depth.
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -85,8 +85,10 @@ cv::Mat texturelessRegions(const cv::Mat& image, const cv::Mat& valid, double mi
 }
 
 cv::Mat applyDepthFilters(const DepthFilterConfig& config, const cv::Mat& raw, const cv::Mat& cost,
-                          const cv::Mat& ratio, const cv::Mat& texture) {
+                          const cv::Mat& ratio, const cv::Mat& texture, const cv::Mat& infinity) {
   cv::Mat depth = raw.clone();
+  const bool use_infinity = config.infinity && !infinity.empty();
+  const float margin = static_cast<float>(config.infinity_margin);
   const int w = raw.cols, h = raw.rows;
   const int split = static_cast<int>(std::lround(config.split_row * h));
   const bool use_texture = config.texture && !texture.empty();
@@ -96,11 +98,13 @@ cv::Mat applyDepthFilters(const DepthFilterConfig& config, const cv::Mat& raw, c
     const float* c = cost.ptr<float>(v);
     const float* q = ratio.ptr<float>(v);
     const float* t = use_texture ? texture.ptr<float>(v) : nullptr;
+    const float* inf = use_infinity ? infinity.ptr<float>(v) : nullptr;
     const float alpha = static_cast<float>(v < split ? config.alpha_upper : config.alpha_lower);
     for (int u = 0; u < w; ++u) {
       if (t && !(t[u] >= min_snr)) d[u] = NAN;
       if (config.cost && !(c[u] <= alpha)) d[u] = NAN;
       if (config.uniqueness && !(q[u] <= config.max_ratio)) d[u] = NAN;
+      if (inf && inf[u] == inf[u] && !(inf[u] - c[u] >= margin)) d[u] = NAN;  // NaN: no test
     }
   }
   if (!config.consistency) return depth;

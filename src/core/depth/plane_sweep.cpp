@@ -474,8 +474,10 @@ DepthResult PlaneSweep::compute(const SweepView& ref, const std::vector<SweepVie
     double all_pairs = 0.0, swept_pairs = 0.0;  // (plane, pixel) pairs: DepthResult::swept_share
     // One scale: slot 0 full view, 1 half view, 2 full-resolution crop.
     // *live gets the level's pixels that can keep a depth (livePixels).
+    // *infinity gets the level's cost at infinity (InfinityCost) when the
+    // infinity filter is on, else stays empty.
     auto run = [&](int slot, const CoarsePrior* prior, cv::Mat* range, cv::Mat* cost, cv::Mat* ratio, cv::Mat* texture,
-                   cv::Mat* live) {
+                   cv::Mat* live, cv::Mat* infinity) {
       SweepLevel level;
       level.id = slot;
       CameraModel cam = ref.camera;
@@ -549,22 +551,25 @@ DepthResult PlaneSweep::compute(const SweepView& ref, const std::vector<SweepVie
         level.poses.push_back(toViewPose(T_view_ref));
       }
       backend_->sweep(level, level_planes, config_, range, cost, ratio);
+      if (infinity) *infinity = config_.filters.infinity ? infinity_.compute(level, config_, *range) : cv::Mat();
       return cam;
     };
-    cv::Mat range, cost, ratio, texture, live;
+    cv::Mat range, cost, ratio, texture, live, infinity;
     if (config_.resolution == SweepResolution::Full) {
-      run(0, nullptr, &result.raw_depth, &result.cost, &result.uniqueness, &result.texture, &live);
+      run(0, nullptr, &result.raw_depth, &result.cost, &result.uniqueness, &result.texture, &live,
+          &result.infinity_cost);
     } else {
       CoarsePrior quarter;
       const bool use_quarter = config_.skip_work && config_.half_search_planes > 0;
       if (use_quarter) {
-        run(3, nullptr, &range, &cost, &ratio, &texture, &live);
+        run(3, nullptr, &range, &cost, &ratio, &texture, &live, nullptr);
         quarter.range = range.clone();
         quarter.rays = &rays_[3].rays;
         quarter.planes_each_side = config_.half_search_planes;
       }
-      run(1, use_quarter ? &quarter : nullptr, &range, &cost, &ratio, &texture, &live);
+      run(1, use_quarter ? &quarter : nullptr, &range, &cost, &ratio, &texture, &live, &infinity);
       result.raw_depth = upsampleNearest(range, W, H);
+      if (!infinity.empty()) result.infinity_cost = upsampleNearest(infinity, W, H);
       result.cost = upsampleNearest(cost, W, H);
       result.uniqueness = upsampleNearest(ratio, W, H);
       result.texture = upsampleNearest(texture, W, H);
@@ -575,7 +580,7 @@ DepthResult PlaneSweep::compute(const SweepView& ref, const std::vector<SweepVie
         prior.x0 = roi.x;
         prior.y0 = roi.y;
         prior.planes_each_side = config_.crop_search_planes;
-        run(2, config_.crop_search_planes > 0 ? &prior : nullptr, &range, &cost, &ratio, &texture, &live);
+        run(2, config_.crop_search_planes > 0 ? &prior : nullptr, &range, &cost, &ratio, &texture, &live, &infinity);
         const int x0 = roi.x, y0 = roi.y;
         for (int v = 0; v < range.rows; ++v) {
           for (int u = 0; u < range.cols; ++u) {
@@ -591,6 +596,7 @@ DepthResult PlaneSweep::compute(const SweepView& ref, const std::vector<SweepVie
             result.cost.at<float>(y0 + v, x0 + u) = cost.at<float>(v, u);
             result.uniqueness.at<float>(y0 + v, x0 + u) = ratio.at<float>(v, u);
             result.texture.at<float>(y0 + v, x0 + u) = texture.at<float>(v, u);
+            if (!infinity.empty()) result.infinity_cost.at<float>(y0 + v, x0 + u) = infinity.at<float>(v, u);
           }
         }
       }
@@ -610,7 +616,8 @@ DepthResult PlaneSweep::compute(const SweepView& ref, const std::vector<SweepVie
   }
   result.sweep_ms = msSince(t0);
   const auto t1 = std::chrono::steady_clock::now();
-  result.depth = applyDepthFilters(config_.filters, result.raw_depth, result.cost, result.uniqueness, result.texture);
+  result.depth = applyDepthFilters(config_.filters, result.raw_depth, result.cost, result.uniqueness, result.texture,
+                                   result.infinity_cost);
   // Masked reference pixels never carry a depth (half resolution could leak).
   result.depth.setTo(NAN, ref_mask != 0);
   result.raw_depth.setTo(NAN, ref_mask != 0);

@@ -95,7 +95,12 @@ const ParamTable<DepthFilterConfig>& DepthFilterConfig::params() {
         .number("gamma", [](C& c) -> double& { return c.gamma; }, R::above(0), "m",
                 "Depth difference under which a neighbour is consistent", kRun)
         .number("delta", [](C& c) -> double& { return c.delta; }, R::between(0, 1), "",
-                "Smallest share of consistent neighbours kept", kRun);
+                "Smallest share of consistent neighbours kept", kRun)
+        .flag("filter_infinity", [](C& c) -> bool& { return c.infinity; },
+              "Drop pixels whose best cost is not below the cost at infinity by infinity_margin (sky, no parallax)",
+              kRun)
+        .number("infinity_margin", [](C& c) -> double& { return c.infinity_margin; }, R::between(0, 1), "",
+                "Smallest amount by which the best cost must beat the cost at infinity", kRun);
     t.rule([](const C& c) {
       require(c.consistency_window % 2 == 1, "consistency_window",
               "must be odd, got " + std::to_string(c.consistency_window));

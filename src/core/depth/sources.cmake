@@ -3,6 +3,7 @@ set(FM_DEPTH_SOURCES
   plane_sweep.cpp
   plane_sweep_config.cpp
   depth_filters.cpp
+  infinity_cost.cpp
   view_selection.cpp
   plane_sweep_cpu.cpp
   plane_sweep_cl.cpp

@@ -48,6 +48,22 @@ float fbm(const Eigen::Vector3d& p, uint32_t seed) {
   return 0.5f * noise(p, seed) + 0.3f * noise(2.03 * p, seed + 1) + 0.2f * noise(4.1 * p, seed + 2);
 }
 
+// Overcast clouds along the direction d (unit), in [0, 1]: six octaves of
+// value noise from 2 to 64 cycles per radian, amplitudes falling by 0.6 per
+// octave, through a soft threshold (cloud edges).
+float overcastClouds(const Eigen::Vector3d& d, uint32_t seed) {
+  float sum = 0.0f, norm = 0.0f, amplitude = 1.0f;
+  double frequency = 2.0;
+  for (int octave = 0; octave < 6; ++octave) {
+    sum += amplitude * noise(frequency * d, seed + 100 + octave);
+    norm += amplitude;
+    amplitude *= 0.6f;
+    frequency *= 2.0;
+  }
+  const float x = std::clamp((sum / norm - 0.35f) / 0.3f, 0.0f, 1.0f);
+  return x * x * (3.0f - 2.0f * x);
+}
+
 // Ray against an axis-aligned box: entry distance and face normal.
 bool rayBox(const Eigen::Vector3d& o, const Eigen::Vector3d& d, const Eigen::Vector3d& lo,
             const Eigen::Vector3d& hi, double* t_hit, Eigen::Vector3d* n) {
@@ -667,7 +683,8 @@ World::Frame World::render(const CameraModel& camera, const std::vector<Eigen::V
           intensity = 0.88f + 0.06f * static_cast<float>(std::max(0.0, d.z()));  // plain sky
           if (config_.clouds > 0) {  // clouds: a texture on the directions, at infinity
             const uint32_t seed = config_.seed * 31u + 17u;
-            intensity += static_cast<float>(config_.clouds) * (fbm(d * 3.0, seed) - 0.5f);
+            intensity += static_cast<float>(config_.clouds) *
+                         ((config_.overcast ? overcastClouds(d, seed) : fbm(d * 3.0, seed)) - 0.5f);
           }
         }
         // Vignetting: darker towards the edge of the field of view.

@@ -86,6 +86,14 @@ struct DepthFilterConfig {
   int consistency_window = 5;    // odd
   double gamma = 0.5;            // metres
   double delta = 0.3;
+  // Infinity: drop pixels whose best cost is not below the cost at infinity
+  // (each supporting view warped by its rotation alone) by at least
+  // infinity_margin. The sky, and any surface too far or too smooth for the
+  // baseline to tell from the sky (a smooth intensity gradient matches at
+  // every plane), has no parallax that supports its depth: without this the
+  // winning plane of a cloudy sky is the noise's choice.
+  bool infinity = true;
+  double infinity_margin = 0.01;  // cost units ((1 - ZNCC) / 2)
   // Throws std::invalid_argument naming the parameter (params().check).
   void validate() const;
   // The declaration of every filter parameter (docs/parameters.md).
@@ -204,6 +212,7 @@ struct DepthResult {
   cv::Mat cost;        // best cost, NaN where no plane had one
   cv::Mat uniqueness;  // best / second-best cost, NaN where none
   cv::Mat texture;     // reference window std / sensor noise std, NaN where none
+  cv::Mat infinity_cost;  // cost at infinity (filters.infinity), NaN where none or not computed
   std::vector<std::string> used_views;     // supporting views matched
   std::vector<std::string> dropped_views;  // "<name>: reason"
   std::vector<std::string> warnings;       // "<name>: ..." (e.g. non-finite pixels of float images, masked)
@@ -225,10 +234,12 @@ std::vector<FmSweepPlane> makeSweepPlanes(const PlaneSweepConfig& config, const 
 cv::Mat toSweepImage(const cv::Mat& image, const std::string& what);
 
 // Applies the enabled filters to raw range (NaN invalid) given the best cost,
-// ratio and texture images (texture may be empty: no texture filter); returns
+// ratio, texture and infinity-cost images (texture / infinity may be empty:
+// no texture / infinity filter; NaN infinity cost: no test there); returns
 // the filtered range.
 cv::Mat applyDepthFilters(const DepthFilterConfig& config, const cv::Mat& raw, const cv::Mat& cost,
-                          const cv::Mat& ratio, const cv::Mat& texture = cv::Mat());
+                          const cv::Mat& ratio, const cv::Mat& texture = cv::Mat(),
+                          const cv::Mat& infinity = cv::Mat());
 
 // Standard deviation of an image's sensor noise (image units), robust to
 // texture: the median absolute response of Immerkaer's noise operator (the
@@ -280,6 +291,37 @@ class SweepBackend {
                      const PlaneSweepConfig& config, cv::Mat* range, cv::Mat* cost, cv::Mat* ratio) = 0;
 };
 std::unique_ptr<SweepBackend> makeCpuSweepBackend();
+
+// The matching cost of each pixel of a level at infinity: every supporting
+// view warped by its rotation alone (the sweep's warp at inverse range -> 0),
+// with the sweep's sampling, window, cost and aggregation functions
+// (complete windows only); NaN where no view has a cost, and, when `range`
+// (the level's swept range) is given, where it has no range. The same on
+// every backend (computed on the CPU). Keeps each level's sample positions
+// until its cameras, poses or rays change; not thread-safe.
+class InfinityCost {
+ public:
+  cv::Mat compute(const SweepLevel& level, const PlaneSweepConfig& config, const cv::Mat& range = cv::Mat());
+
+ private:
+  struct Sample {  // fm_bilinear_setup's output
+    int i00 = 0, dx = 0, dy = 0, inside = 0;
+    float ax = 0.0f, ay = 0.0f;
+  };
+  struct Key {
+    int width = 0, height = 0;
+    unsigned rays_version = 0;
+    std::vector<FmCameraT<float>> cameras;
+    std::vector<FmViewPose> poses;
+    bool operator==(const Key& o) const;
+  };
+  struct Cache {
+    Key key;
+    std::vector<std::vector<Sample>> samples;  // per view, per pixel
+  };
+  const std::vector<Sample>& samples(const SweepLevel& level, int view);
+  Cache cache_[4];  // per level slot
+};
 std::unique_ptr<SweepBackend> makeNativeSweepBackend();
 std::unique_ptr<SweepBackend> makeOpenClSweepBackend(const std::string& device);
 
@@ -321,6 +363,7 @@ class PlaneSweep {
     unsigned version = 0;
   };
   RayCache rays_[4];
+  InfinityCost infinity_;
 };
 
 // The rig's cameras as sweep views relative to camera `ref_index`.
