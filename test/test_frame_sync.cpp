@@ -240,3 +240,102 @@ TEST(StreamTimeline, AStreamThatStaysAheadJoinsInsteadOfStallingAndSmallStepsAre
   EXPECT_THROW(tl.observe(2, 0), std::out_of_range);
   EXPECT_THROW(StreamTimeline(0, 1.0), std::invalid_argument);
 }
+
+// ---------------------------------------------------------------------------
+// Every frame set accounted for: complete + dropped by reason = the sets fed.
+
+TEST(FrameSyncAccounting, StampsBackwardsCountedOncePerFrameSet) {
+  FrameSetSync<int> sync(3, SyncPolicy::Exact, 0.0, 8, 1.0);
+  // Ten frame sets; the last five step back 50 ms between the first five's
+  // stamps (small steps: late images, not a new timeline).
+  const double stamps[] = {1.0, 1.1, 1.2, 1.3, 1.4, 1.05, 1.15, 1.25, 1.35, 1.45};
+  std::size_t published = 0;
+  for (double t : stamps) published += feed(sync, 3, t);
+  sync.finish();
+  const auto& s = sync.stats();
+  EXPECT_EQ(published, 6u);
+  EXPECT_EQ(s.complete, 6u);
+  EXPECT_EQ(s.sets_backwards, 4u);  // 1.05 .. 1.35: three images each, one frame set each
+  EXPECT_EQ(s.dropped_out_of_order, 12u);
+  EXPECT_EQ(s.sets_duplicate, 0u);
+  EXPECT_EQ(s.dropped_incomplete, 0u);
+  EXPECT_EQ(s.sets(), 10u);
+  EXPECT_EQ(s.time_resets, 0u);
+}
+
+TEST(FrameSyncAccounting, AllImagesSharingOneStampAreDuplicates) {
+  FrameSetSync<int> sync(2, SyncPolicy::Exact, 0.0, 8, 1.0);
+  std::size_t published = 0;
+  for (int k = 0; k < 10; ++k) published += feed(sync, 2, 5.0);
+  sync.finish();
+  const auto& s = sync.stats();
+  EXPECT_EQ(published, 1u);
+  EXPECT_EQ(s.sets_duplicate, 9u);
+  EXPECT_EQ(s.sets_backwards, 0u);
+  EXPECT_EQ(s.dropped_incomplete, 0u);
+  EXPECT_EQ(s.sets(), 10u);
+}
+
+TEST(FrameSyncAccounting, DuplicateWhileOpenIsCountedNotLost) {
+  // cam0 sends its 2.0 image twice before cam1's arrives: the second copy was
+  // once an open set that vanished uncounted when the first completed.
+  FrameSetSync<int> sync(2, SyncPolicy::Exact, 0.0, 8, 1.0);
+  sync.add(0, sec(2.0), 0);
+  sync.add(0, sec(2.0), 0);
+  EXPECT_EQ(sync.open(), 1u);
+  EXPECT_EQ(sync.add(1, sec(2.0), 1).size(), 1u);
+  EXPECT_EQ(sync.stats().sets_duplicate, 1u);
+  EXPECT_EQ(sync.stats().sets(), 2u);
+}
+
+TEST(FrameSyncAccounting, LateImageOfAnIncompleteSetAndOpenSetsAtTheEnd) {
+  FrameSetSync<int> sync(3, SyncPolicy::Exact, 0.0, 8, 1.0);
+  sync.add(0, sec(1.0), 0);
+  sync.add(1, sec(1.0), 1);
+  EXPECT_EQ(feed(sync, 3, 1.1), 1u);  // 1.0 dropped as incomplete
+  sync.add(2, sec(1.0), 2);           // its late image: the same frame set, not another
+  sync.add(0, sec(1.2), 0);           // open at the end of the stream
+  sync.finish();
+  const auto& s = sync.stats();
+  EXPECT_EQ(s.complete, 1u);
+  EXPECT_EQ(s.dropped_incomplete, 2u);
+  EXPECT_EQ(s.dropped_out_of_order, 1u);
+  EXPECT_EQ(s.sets_backwards, 0u);
+  EXPECT_EQ(s.sets(), 3u);
+  EXPECT_EQ(sync.open(), 0u);
+}
+
+TEST(FrameSyncAccounting, OldTimelineStragglersJoinTheSetTheResetDropped) {
+  FrameSetSync<int> sync(3, SyncPolicy::Exact, 0.0, 8, 1.0);
+  for (double t : {100.0, 100.1}) EXPECT_EQ(feed(sync, 3, t), 1u);
+  sync.add(0, sec(100.2), 0);
+  sync.add(0, sec(90.0), 0);  // reset: {cam0 @100.2} dropped as incomplete
+  sync.add(1, sec(100.2), 1);
+  sync.add(2, sec(100.2), 2);
+  sync.add(1, sec(90.0), 1);
+  EXPECT_EQ(sync.add(2, sec(90.0), 2).size(), 1u);
+  sync.finish();
+  const auto& s = sync.stats();
+  EXPECT_EQ(s.dropped_stale, 2u);
+  EXPECT_EQ(s.sets_stale, 0u);  // the same frame set as the incomplete one
+  EXPECT_EQ(s.dropped_incomplete, 1u);
+  EXPECT_EQ(s.sets(), 4u);  // 100.0, 100.1, 100.2, 90.0
+}
+
+TEST(FrameSyncAccounting, ApproximatePolicyAddsUp) {
+  FrameSetSync<int> sync(2, SyncPolicy::Approximate, 0.005, 8, 1.0);
+  const std::int64_t ms = 1000000;
+  for (int k = 0; k < 5; ++k) {
+    sync.add(0, sec(1.0 + 0.1 * k), 0);
+    sync.add(1, sec(1.0 + 0.1 * k) + 2 * ms, 1);
+  }
+  sync.add(0, sec(1.15), 0);  // backwards
+  sync.add(1, sec(1.15) + 1 * ms, 1);
+  sync.add(1, sec(1.4) + 2 * ms, 1);  // duplicate of cam1's last
+  sync.finish();
+  const auto& s = sync.stats();
+  EXPECT_EQ(s.complete, 5u);
+  EXPECT_EQ(s.sets_backwards, 1u);
+  EXPECT_EQ(s.sets_duplicate, 1u);
+  EXPECT_EQ(s.sets(), 7u);
+}

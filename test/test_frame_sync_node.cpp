@@ -143,6 +143,12 @@ TEST(FrameSyncNode, GroupsDropsAndDiagnoses) {
   }, 5.0)) << "the reset is not on /diagnostics: " << last.message;
   EXPECT_NE(kv["last time reset"].find("140.000 s -> 120.000 s"), std::string::npos) << kv["last time reset"];
   EXPECT_EQ(kv["out-of-order images dropped"], "3");
+  // Issue 28: the three jitter images are one frame set, dropped as stamps backwards.
+  EXPECT_EQ(kv["frame sets dropped: stamps backwards"], "1");
+  EXPECT_EQ(kv["frame sets dropped: duplicate stamp"], "0");
+  EXPECT_EQ(std::stoi(kv["frame sets dropped"]),
+            std::stoi(kv["frame sets dropped: stamps backwards"]) + std::stoi(kv["frame sets dropped: incomplete"]) +
+                std::stoi(kv["frame sets dropped: old timeline"]));
 }
 
 

@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <sys/wait.h>
@@ -67,7 +68,26 @@ TEST(PlaneSweepTool, ImagesToDepthTiff) {
 
   // Bad input.
   EXPECT_EQ(run(kRig + " --image cam0=" + dir + "/missing.png --out " + dir + "/g", &out), 1);
-  EXPECT_NE(out.find("missing.png: cannot read image"), std::string::npos) << out;
+  EXPECT_NE(out.find("--image cam0: " + dir + "/missing.png: cannot open (No such file or directory)"), std::string::npos) << out;
+  // Issue 28: a JPEG cut short is an error (libjpeg only warned, and the sweep
+  // ran on grey: exit 0, 0 valid pixels); so is a FIFO; a camera given twice
+  // is a usage error (the second image was taken silently).
+  {
+    std::vector<uchar> jpg;
+    ASSERT_TRUE(cv::imencode(".jpg", cv::imread(dir + "/cam0.png", cv::IMREAD_GRAYSCALE), jpg));
+    std::ofstream(dir + "/cut.jpg", std::ios::binary).write(reinterpret_cast<const char*>(jpg.data()), jpg.size() / 2);
+  }
+  EXPECT_EQ(run(kRig + " --image cam0=" + dir + "/cut.jpg --out " + dir + "/g", &out), 1);
+  EXPECT_NE(out.find("--image cam0: " + dir + "/cut.jpg: JPEG cut short"), std::string::npos) << out;
+  EXPECT_EQ(out.find("valid pixels"), std::string::npos) << out;
+  ASSERT_EQ(mkfifo((dir + "/fifo.png").c_str(), 0600), 0);
+  EXPECT_EQ(run(kRig + " --image cam0=" + dir + "/cam0.png --mask cam0=" + dir + "/fifo.png --out " + dir + "/g", &out), 1);
+  EXPECT_NE(out.find("--mask cam0: " + dir + "/fifo.png: is a FIFO (named pipe), not a regular file"), std::string::npos) << out;
+  EXPECT_EQ(run(kRig + " --image cam0=" + dir + "/cam0.png --image cam1=" + dir + "/cam1.png --image cam0=" + dir +
+                    "/cam2.png --out " + dir + "/g",
+                &out),
+            2);
+  EXPECT_NE(out.find("--image cam0= given twice (one per camera)"), std::string::npos) << out;
   cv::imwrite(dir + "/small.png", cv::Mat(50, 60, CV_8UC1, cv::Scalar(3)));
   EXPECT_EQ(run(kRig + " --image cam0=" + dir + "/small.png --out " + dir + "/g", &out), 1);
   EXPECT_NE(out.find("image is 60x50 but the calibration says 256x136"), std::string::npos) << out;

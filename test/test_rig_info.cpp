@@ -8,6 +8,7 @@
 #include <string>
 
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -206,3 +207,60 @@ TEST(RigInfo, DefaultRigPrints) {
 }
 
 }  // namespace
+
+// Issue 28: a FIFO given as the camchain is refused at once (it blocked
+// forever); an absurd principal point or fx/fy ratio is refused naming the
+// camera and the field; hexadecimal coordinates are not numbers; --project ''
+// is a usage error, not the summary.
+TEST(RigInfo, FifoCamchainIsRefusedWithoutBlocking) {
+  const std::string fifo = "/tmp/fm_test_rig_info_fifo_" + std::to_string(getpid());
+  std::remove(fifo.c_str());
+  ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0);
+  const auto t0 = std::chrono::steady_clock::now();
+  // timeout: a regression blocks in open(); the test then fails instead of hanging.
+  const Result r = run("--camchain " + fifo + " --mount " + kMount, "", true);
+  const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::remove(fifo.c_str());
+  EXPECT_EQ(r.status, 2) << r.out;
+  EXPECT_EQ(r.out, "rig_info: --camchain: " + fifo + " is a FIFO (named pipe), not a regular file\n");
+  EXPECT_LT(s, 5.0);
+  const Result dev = run("--camchain /dev/zero --mount " + kMount, "", true);
+  EXPECT_EQ(dev.status, 2);
+  EXPECT_EQ(dev.out, "rig_info: --camchain: /dev/zero is a character device, not a regular file\n");
+}
+
+TEST(RigInfo, AbsurdPrincipalPointAndFocalRatioNameCameraAndField) {
+  const std::string chain = readFile(kChain);
+  const std::string far_cx = writeTmp("far_cx.yaml", replaced(chain, "[1.0, 300.0, 300.0, 512.0, 272.0]", "[1.0, 300.0, 300.0, 100000.0, 272.0]"));
+  const std::string neg_cy = writeTmp("neg_cy.yaml", replaced(chain, "[300.0, 300.0, 512.0, 272.0]", "[300.0, 300.0, 512.0, -40.0]"));
+  const std::string ratio = writeTmp("ratio.yaml", replaced(chain, "[1.0, 300.0, 300.0,", "[1.0, 520.0, 1.5,"));
+  const struct {
+    std::string chain, expected;
+  } cases[] = {
+      {far_cx, far_cx + ": cam0.intrinsics: cx 100000 is outside the image: the principal point must lie in [-0.5, 1023.5] for width 1024"},
+      {neg_cy, neg_cy + ": cam1.intrinsics: cy -40 is outside the image: the principal point must lie in [-0.5, 543.5] for height 544"},
+      {ratio, ratio + ": cam0.intrinsics: fx 520 and fy 1.5 differ by more than a factor of 10 (fx/fy = 346.667)"},
+  };
+  for (const auto& c : cases) {
+    const Result r = run("--camchain " + c.chain + " --mount " + kMount, "", true);
+    EXPECT_EQ(r.status, 2) << r.out;
+    EXPECT_EQ(r.out, "rig_info: " + c.expected + "\n");
+  }
+}
+
+TEST(RigInfo, HexadecimalCoordinatesAreNotNumbers) {
+  const Result r = run(kRig + " --project cam0", "0x10 0 1\n1 2 2\n0x1p3 1 1\n", true);
+  EXPECT_NE(r.out.find("rig_info: line 1: expected 'x y z' (finite numbers), got '0x10 0 1'"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("rig_info: line 3:"), std::string::npos) << r.out;
+  EXPECT_EQ(r.status, 1);
+  const Result out = run(kRig + " --project cam0", "0x10 0 1\n1 2 2\n");
+  EXPECT_EQ(out.out, "invalid\n572.000000000 392.000000000\n");
+}
+
+TEST(RigInfo, EmptyFilterCameraIsAUsageError) {
+  for (const std::string opt : {"--project", "--unproject"}) {
+    const Result r = run(kRig + " " + opt + " ''", "1 2 2\n", true);
+    EXPECT_EQ(r.status, 2) << r.out;
+    EXPECT_EQ(r.out.rfind("rig_info: " + opt + " needs a camera name, got ''\n", 0), 0u) << r.out;
+  }
+}

@@ -21,6 +21,7 @@
 #include <tuple>
 
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 #include <zlib.h>
 
 #include "fisheye_mapping/core/sim/analytic_scene.h"
@@ -894,6 +895,48 @@ ToolRun runTool(const std::string& args) {
   const int st = pclose(p);
   r.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
   return r;
+}
+
+// Issue 28: map_tool applies the header ranges the nodelet's parameters have
+// (truncation = 1e9 voxels was "valid" and meshed); a FIFO is refused at once.
+TEST_F(MapFile, MapToolAppliesTheNodeletsHeaderRanges) {
+  const std::string d = tempDir();
+  const struct {
+    size_t at;
+    double value;
+    std::string expected;
+  } cases[] = {
+      {20, 1e9, "bad header: truncation_voxels 1e+09 (must lie in (0, 1000] voxels)"},
+      {12, 50.0, "bad header: voxel_size 50 m (must lie in (0, 10] m)"},
+  };
+  for (const auto& c : cases) {
+    std::string b = *good_;
+    put<double>(&b, c.at, c.value);
+    fixHeaderCrc(&b);
+    writeBytes(d + "/range.fmtsdf", b);
+    for (const std::string cmd : {"check ", "info "}) {
+      const ToolRun r = runTool(cmd + d + "/range.fmtsdf");
+      EXPECT_EQ(r.status, 1) << r.out;
+      EXPECT_NE(r.out.find(c.expected), std::string::npos) << r.out;
+    }
+    ToolRun r = runTool("convert " + d + "/range.fmtsdf " + d + "/range.ply");
+    EXPECT_EQ(r.status, 1) << r.out;
+    EXPECT_FALSE(fs::exists(d + "/range.ply"));
+    // The same loader as the nodelet's (TsdfMap::readHeader).
+    EXPECT_THROW(TsdfMap::readHeader(d + "/range.fmtsdf"), std::runtime_error);
+  }
+  // The parameter ranges are the header's.
+  TsdfConfig cfg;
+  cfg.truncation_voxels = 1e9;
+  EXPECT_THROW(cfg.validate(), std::invalid_argument);
+  cfg = TsdfConfig();
+  cfg.voxel_size = 50;
+  EXPECT_THROW(cfg.validate(), std::invalid_argument);
+  const std::string fifo = d + "/fifo.fmtsdf";
+  ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0);
+  const ToolRun r = runTool("check " + fifo);
+  EXPECT_EQ(r.status, 1) << r.out;
+  EXPECT_NE(r.out.find("is a FIFO (named pipe), not a regular file, not a map file"), std::string::npos) << r.out;
 }
 
 TEST_F(MapFile, MapToolReadsTheSameFiles) {

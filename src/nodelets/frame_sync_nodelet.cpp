@@ -208,7 +208,8 @@ class FrameSyncNodelet : public nodelet::Nodelet {
     try {
       auto sync = makeSync(*next);
       for (std::size_t i = 0; i < sync_->open(); ++i) monitor_->dropped("open set (reconfigured)");
-      addStats(base_stats_, sync_->stats());
+      sync_->finish();  // its open sets: counted as incomplete
+      base_stats_ += sync_->stats();
       sync_ = std::move(sync);
       seen_ = {};
       cfg_ = *next;
@@ -218,14 +219,6 @@ class FrameSyncNodelet : public nodelet::Nodelet {
       monitor_->error(std::string("sync parameters rejected: ") + e.what());
       NODELET_ERROR("sync parameters rejected: %s", e.what());
     }
-  }
-
-  static void addStats(Sync::Stats& a, const Sync::Stats& b) {
-    a.complete += b.complete;
-    a.dropped_incomplete += b.dropped_incomplete;
-    a.dropped_out_of_order += b.dropped_out_of_order;
-    a.time_resets += b.time_resets;
-    a.dropped_stale += b.dropped_stale;
   }
 
   void updateSubscription() {
@@ -412,8 +405,14 @@ class FrameSyncNodelet : public nodelet::Nodelet {
       if (c.bad) stat.add(name + " bad images", c.bad);
     }
     Sync::Stats s = base_stats_;
-    addStats(s, sync_->stats());
+    s += sync_->stats();
     stat.add("frame sets out", s.complete);
+    // Every frame set by what became of it: out + these = the frame sets seen.
+    stat.add("frame sets dropped", s.setsDropped());
+    stat.add("frame sets dropped: stamps backwards", s.sets_backwards);
+    stat.add("frame sets dropped: duplicate stamp", s.sets_duplicate);
+    stat.add("frame sets dropped: incomplete", s.dropped_incomplete);
+    stat.add("frame sets dropped: old timeline", s.sets_stale);
     stat.add("incomplete sets dropped", s.dropped_incomplete);
     stat.add("out-of-order images dropped", s.dropped_out_of_order);
     stat.add("stale images dropped (old timeline)", s.dropped_stale);

@@ -8,6 +8,8 @@
 #include <sensor_msgs/image_encodings.h>
 #include <tf2_eigen/tf2_eigen.h>
 
+#include "fisheye_mapping/core/common/safe_open.h"
+
 namespace fisheye_mapping {
 
 namespace enc = sensor_msgs::image_encodings;
@@ -297,10 +299,10 @@ cv::Mat toGrey(const sensor_msgs::CompressedImage& msg, const std::string& sourc
   if (msg.format.find("compressedDepth") != std::string::npos)
     throw ImageConversionError(what + " rejected: compressedDepth is a depth format, not a camera image");
   if (msg.data.empty()) throw ImageConversionError(what + " rejected: no data");
-  const cv::Mat grey = cv::imdecode(cv::Mat(1, int(msg.data.size()), CV_8UC1, const_cast<uint8_t*>(msg.data.data())),
-                                    cv::IMREAD_GRAYSCALE);
-  if (grey.empty()) throw ImageConversionError(what + " rejected: cv::imdecode cannot decode its " +
-                                               std::to_string(msg.data.size()) + " bytes");
+  // Undecodable, or a JPEG cut short (which libjpeg decodes with a warning).
+  cv::Mat grey;
+  const std::string why = decodeImage(msg.data.data(), msg.data.size(), cv::IMREAD_GRAYSCALE, &grey);
+  if (!why.empty()) throw ImageConversionError(what + " rejected: " + why);
   return grey;
 }
 

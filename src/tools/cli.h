@@ -32,6 +32,8 @@
 
 #include <unistd.h>
 
+#include "fisheye_mapping/core/common/safe_open.h"
+
 namespace fisheye_mapping {
 namespace cli {
 
@@ -111,19 +113,34 @@ inline long long parseInt(const std::string& option, const std::string& text, lo
   return v;
 }
 
-// A finite number in [lo, hi] (decimal or exponent notation; no "nan", "inf",
-// trailing text or hexadecimal).
-inline double parseDouble(const std::string& option, const std::string& text, double lo, double hi) {
-  const auto bad = [&]() { return UsageError(option + " needs a number, got '" + text + "'"); };
-  if (text.empty() || text.size() > 64) throw bad();
+// A finite decimal number (decimal or exponent notation: no "nan", "inf",
+// trailing text or hexadecimal such as 0x10, which strtod alone accepts):
+// the tools' one number syntax, for options and for rig_info's input lines.
+// False when `text` is not one; *out_of_range when it overflows.
+inline bool parseDecimal(const std::string& text, double* v, bool* out_of_range = nullptr) {
+  if (out_of_range) *out_of_range = false;
+  if (text.empty() || text.size() > 64) return false;
   for (char c : text) {
-    if (!((c >= '0' && c <= '9') || c == '.' || c == '-' || c == '+' || c == 'e' || c == 'E')) throw bad();
+    if (!((c >= '0' && c <= '9') || c == '.' || c == '-' || c == '+' || c == 'e' || c == 'E')) return false;
   }
   errno = 0;
   char* end = nullptr;
-  const double v = std::strtod(text.c_str(), &end);
-  if (end == text.c_str() || *end != '\0') throw bad();
-  if (!std::isfinite(v) || errno == ERANGE || v < lo || v > hi) {
+  *v = std::strtod(text.c_str(), &end);
+  if (end == text.c_str() || *end != '\0') return false;
+  if (!std::isfinite(*v) || errno == ERANGE) {
+    if (out_of_range) *out_of_range = true;
+    return false;
+  }
+  return true;
+}
+
+// A finite number in [lo, hi] (parseDecimal's syntax).
+inline double parseDouble(const std::string& option, const std::string& text, double lo, double hi) {
+  double v = 0;
+  bool out_of_range = false;
+  if (!parseDecimal(text, &v, &out_of_range) && !out_of_range)
+    throw UsageError(option + " needs a number, got '" + text + "'");
+  if (out_of_range || v < lo || v > hi) {
     throw UsageError(option + " must lie in [" + numberText(lo) + ", " + numberText(hi) + "], got " + text);
   }
   return v;
@@ -174,8 +191,10 @@ inline void requireInputFile(const std::string& option, const std::string& path)
   const fs::file_status st = fs::status(path, ec);
   if (ec || !fs::exists(st)) throw UsageError(option + ": " + path + ": no such file");
   if (fs::is_directory(st)) throw UsageError(option + ": " + path + " is a directory, expected a file");
-  std::ifstream f(path);
-  if (!f) throw UsageError(option + ": " + path + ": cannot open for reading");
+  // Opened without blocking: a FIFO or a device is refused at once.
+  const std::string why = regularFileProblem(path, kNoSizeLimit);
+  if (why.rfind("cannot open", 0) == 0) throw UsageError(option + ": " + path + ": cannot open for reading");
+  if (!why.empty()) throw UsageError(option + ": " + path + " " + why);
 }
 
 // An output folder: created when missing (with its parents); an existing path

@@ -42,6 +42,7 @@
 #include <optional>
 #include <string>
 #include <filesystem>
+#include <set>
 #include <sstream>
 #include <vector>
 
@@ -52,6 +53,7 @@
 #include "fisheye_mapping/core/depth/depth_image.h"
 #include "fisheye_mapping/core/mapping/frame_set_mapper.h"
 #include "fisheye_mapping/core/sync/frame_sync.h"
+#include "fisheye_mapping/ros/bag_reading.h"
 #include "fisheye_mapping/ros/conversions.h"
 #include "fisheye_mapping/ros/param_registry.h"
 
@@ -290,7 +292,7 @@ int main(int argc, char** argv) {
     if (sync_policy) sync_cfg.policy = *sync_policy;
     if (sync_tolerance) sync_cfg.max_interval = *sync_tolerance;
     sync_cfg.validate();
-    const std::vector<std::string> camera_topics = imageTopics(rig, sync_cfg.image_topics, topic_overrides);
+    const std::vector<std::string> configured_topics = imageTopics(rig, sync_cfg.image_topics, topic_overrides);
     std::unique_ptr<fm::Detector> det;
     if (detector != "none" && detector != "ground_truth") {
       std::string yaml = detector;
@@ -312,11 +314,7 @@ int main(int argc, char** argv) {
     if (detecting && depth_src == "gt")
       throw std::runtime_error("--depth gt works with --detector ground_truth or none (no images are read)");
     rosbag::Bag bag;
-    try {
-      bag.open(bag_path, rosbag::bagmode::Read);
-    } catch (const std::exception& e) {
-      throw std::runtime_error("cannot open bag " + bag_path + ": " + e.what());
-    }
+    fm::openBagForReading(bag, bag_path);  // a bag cut short: the rosbag reindex command
     // Pass 1: poses and ground-truth boxes.
     tf2::BufferCore tf(ros::Duration(1e6));
     std::map<uint64_t, fm::Detection2DArray::ConstPtr> gt_boxes;
@@ -336,7 +334,15 @@ int main(int argc, char** argv) {
     if (detector == "ground_truth" && gt_boxes.empty())
       throw std::runtime_error(bag_path + " has no " + gt_topic + " (ground-truth boxes); use --detector none or a model");
 
-    // Pass 2: frame sets.
+    // Pass 2: frame sets. A camera topic the bag lacks is read from
+    // <topic>/compressed when the bag has that (image_transport's name).
+    std::vector<std::string> camera_topics = configured_topics;
+    {
+      std::set<std::string> in_bag;
+      for (const rosbag::ConnectionInfo* c : rosbag::View(bag).getConnections()) in_bag.insert(c->topic);
+      for (std::string& t : camera_topics)
+        if (!in_bag.count(t) && in_bag.count(t + "/compressed")) t += "/compressed";
+    }
     std::vector<std::string> topics = camera_topics;
     std::map<std::string, int> cam_of;
     for (size_t c = 0; c < topics.size(); ++c) cam_of[topics[c]] = int(c);
@@ -369,6 +375,15 @@ int main(int argc, char** argv) {
                  "residual_deg,inliers,level,status\n";
     std::vector<double> t_sweep, t_det, t_mask, t_fuse, t_total;
     size_t sets_seen = 0, processed = 0, submitted = 0, skipped_pose = 0, no_boxes = 0;
+    // Complete frame sets not mapped: an image that does not decode, --every.
+    size_t undecodable = 0, skipped_every = 0;
+    bool stopped_early = false;  // --frames reached: the rest of the bag is not read
+    std::set<std::string> not_images;  // topics with a message of another type (warned once)
+    // A skipped frame set's warning; the first 20 of each reason, then a count at the end.
+    std::map<std::string, int> warned;
+    auto warnSkip = [&](const std::string& reason, const std::string& text) {
+      if (++warned[reason] <= 20) std::fprintf(stderr, "\noffline_mapper: %s\n", text.c_str());
+    };
     const auto run_start = Clock::now();
     std::deque<ros::Time> in_flight;  // stamps of the frame sets submitted and not yet back
     // One frame set's result: the self-calibration's state, the depth TIFF,
@@ -442,11 +457,22 @@ int main(int argc, char** argv) {
     };
     for (const rosbag::MessageInstance& m : images) {
       const std::optional<BagImage> img = BagImage::of(m);
-      if (!img) continue;
+      if (!img) {
+        if (not_images.insert(m.getTopic()).second)
+          std::fprintf(stderr, "\noffline_mapper: %s holds %s, not sensor_msgs/Image or CompressedImage: ignored\n",
+                       m.getTopic().c_str(), m.getDataType().c_str());
+        continue;
+      }
       auto done = sync.add(cam_of[m.getTopic()], std::int64_t(img->header().stamp.toNSec()), *img);
       for (auto& set : done) {
-        if (sets_seen++ % every != 0) continue;
-        if (max_frames > 0 && int(submitted) >= max_frames) break;
+        if (sets_seen++ % every != 0) {
+          ++skipped_every;
+          continue;
+        }
+        if (max_frames > 0 && int(submitted) >= max_frames) {
+          stopped_early = true;
+          break;
+        }
         const ros::Time stamp = set[ref_slot].header().stamp;
         Eigen::Isometry3d T_W_B;
         try {
@@ -454,6 +480,25 @@ int main(int argc, char** argv) {
         } catch (const std::exception& e) {
           ++skipped_pose;
           if (!quiet) std::fprintf(stderr, "\nframe set %.3f skipped: no pose (%s)\n", stamp.toSec(), e.what());
+          continue;
+        }
+        // Decoded before anything is submitted: an image that does not decode
+        // (damaged, a JPEG cut short) skips its frame set, and the drive goes on.
+        std::vector<cv::Mat> images;
+        cv::Mat depth_gt, grey_gt;
+        try {
+          if (depth_src == "gt") {
+            if (!set[0].raw) throw std::runtime_error(gt_depth_topic + " must hold sensor_msgs/Image (32FC1)");
+            depth_gt = fm::toDepth(*set[0].raw, gt_depth_topic);
+            grey_gt = set[1].greyImage(topics[1]);
+          } else {
+            for (size_t c = 0; c < set.size(); ++c) images.push_back(set[c].sweepImage(topics[c]));
+          }
+        } catch (const std::exception& e) {
+          ++undecodable;
+          char at[64];
+          std::snprintf(at, sizeof at, "%.3f", stamp.toSec());
+          warnSkip("undecodable", std::string("frame set ") + at + " skipped: undecodable image: " + e.what());
           continue;
         }
         std::optional<fm::ImageBoxes> boxes;
@@ -468,16 +513,11 @@ int main(int argc, char** argv) {
         }
         ++submitted;
         if (depth_src == "gt") {
-          if (!set[0].raw) throw std::runtime_error(gt_depth_topic + " must hold sensor_msgs/Image (32FC1)");
-          handle(mapper.processDepth(fm::toDepth(*set[0].raw, gt_depth_topic), T_W_B, boxes,
-                                     set[1].greyImage(rig.cameras[ref].name)),
-                 stamp);
+          handle(mapper.processDepth(depth_gt, T_W_B, boxes, grey_gt), stamp);
         } else {
           // Pipelined: this set's depth while the previous one is masked and
           // fused (and this one's detection runs); its result comes back with
           // the next set's submit, the last with flush().
-          std::vector<cv::Mat> images;
-          for (size_t c = 0; c < set.size(); ++c) images.push_back(set[c].sweepImage(rig.cameras[c].name));
           in_flight.push_back(stamp);
           std::optional<fm::FrameSetResult> previous = mapper.submit(images, T_W_B, boxes, stamp.toSec());
           if (previous) {
@@ -486,11 +526,28 @@ int main(int argc, char** argv) {
           }
         }
       }
-      if (max_frames > 0 && int(submitted) >= max_frames) break;
+      if (max_frames > 0 && int(submitted) >= max_frames) {
+        stopped_early = true;
+        break;
+      }
     }
+    if (!stopped_early) sync.finish();  // the sets still open at the bag's end: incomplete
+    for (const auto& [reason, n] : warned)
+      if (n > 20) std::fprintf(stderr, "\noffline_mapper: %d more frame sets skipped (%s) not listed\n", n - 20, reason.c_str());
     if (std::optional<fm::FrameSetResult> last = mapper.flush()) handle(std::move(*last), in_flight.front());
     if (!quiet) std::fprintf(stderr, "\n");
-    if (processed == 0) throw std::runtime_error("no complete frame set with a pose in " + bag_path);
+    // Every frame set of the bag accounted for: mapped, or dropped by reason.
+    const auto& s = sync.stats();
+    const unsigned long sets_total = (unsigned long)s.sets();
+    const std::string accounted =
+        std::string(stopped_early ? "of the first " : "of the ") + std::to_string(sets_total) +
+        " frame sets" + (stopped_early ? " read (stopped at --frames)" : " in the bag") + ": " +
+        std::to_string(processed) + " mapped, " + std::to_string(sets_total - processed) + " not: " +
+        std::to_string(s.sets_backwards) + " stamps backwards, " + std::to_string(s.sets_duplicate) +
+        " duplicate stamp, " + std::to_string(s.dropped_incomplete) + " incomplete, " + std::to_string(undecodable) +
+        " undecodable image, " + std::to_string(skipped_pose) + " without a pose, " + std::to_string(s.sets_stale) +
+        " old timeline, " + std::to_string(skipped_every) + " skipped by --every";
+    if (processed == 0) throw std::runtime_error("no complete frame set with a pose in " + bag_path + " (" + accounted + ")");
     const double wall = std::chrono::duration<double>(Clock::now() - run_start).count();
     mapper.finish();                   // the frame sets since the last mesh update
     mesher_all.rebuild(mapper.map());  // every block of both stores, after the last frame
@@ -515,9 +572,8 @@ int main(int argc, char** argv) {
         std::cerr << "offline_mapper: " << what << " not written: " << e.what() << "\n";
       }
     }
-    const auto& s = sync.stats();
     std::ostringstream md;
-    char buf[512];
+    char buf[1024];
     md << "| stage | median ms | mean ms |\n|---|---:|---:|\n";
     auto row = [&](const char* name, const std::vector<double>& v) {
       std::snprintf(buf, sizeof(buf), "| %s | %.1f | %.1f |\n", name, median(v),
@@ -531,9 +587,9 @@ int main(int argc, char** argv) {
     row("total per frame set", t_total);
     std::snprintf(buf, sizeof(buf),
                   "\n%zu frame sets mapped in %.1f s (%.2f per second, end to end, reading the bag included); "
-                  "%lu incomplete sets dropped, %zu without a pose, %zu without ground-truth boxes; "
+                  "%s; %zu without ground-truth boxes; "
                   "sync %s; sweep backend %s; map: %zu triangles, %zu cloud points.\n",
-                  processed, wall, processed / wall, (unsigned long)s.dropped_incomplete, skipped_pose, no_boxes,
+                  processed, wall, processed / wall, accounted.c_str(), no_boxes,
                   syncText(gt_depth ? fm::SyncPolicy::Exact : sync_cfg.policy, sync_cfg.max_interval).c_str(),
                   mapper.depthStage().backendName().c_str(), mesher.numTriangles(), mesher.surfaceCloud().size());
     md << buf;

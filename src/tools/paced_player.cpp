@@ -70,6 +70,7 @@
 #include "fisheye_mapping/FrameDone.h"
 #include "fisheye_mapping/core/sync/frame_pacer.h"
 #include "fisheye_mapping/core/camera/rig.h"
+#include "fisheye_mapping/ros/bag_reading.h"
 #include "fisheye_mapping/ros/camera_info.h"
 
 namespace fm = fisheye_mapping;
@@ -232,9 +233,9 @@ int main(int argc, char** argv) {
 
   rosbag::Bag bag;
   try {
-    bag.open(bag_path, rosbag::bagmode::Read);
+    fm::openBagForReading(bag, bag_path);  // a bag cut short: the rosbag reindex command
   } catch (const std::exception& e) {
-    ROS_FATAL("paced_player: cannot read the bag %s: %s", bag_path.c_str(), e.what());
+    ROS_FATAL("paced_player: %s", e.what());
     return 1;
   }
   // Input checks before anything is published.

@@ -27,6 +27,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include "cli.h"
+#include "fisheye_mapping/ros/bag_reading.h"
 #include "fisheye_mapping/core/depth/depth_image.h"
 #include "fisheye_mapping/core/common/params.h"
 #include "fisheye_mapping/core/depth/depth_stage.h"
@@ -115,6 +116,14 @@ int main(int argc, char** argv) {
     }
     if (images.empty() == !one.count("bag"))
       throw fm::cli::UsageError("give either --image CAM=FILE ... or --bag FILE");
+    // One image (and one mask) per camera: a repeated camera is a mistake, not a choice.
+    for (const auto* list : {&images, &masks}) {
+      std::set<std::string> seen;
+      for (const auto& [cam, path] : *list)
+        if (!seen.insert(cam).second)
+          throw fm::cli::UsageError(std::string(list == &images ? "--image" : "--mask") + " " + cam +
+                                    "= given twice (one per camera)");
+    }
   });
   if (rc >= 0) return rc;
   try {
@@ -130,14 +139,13 @@ int main(int argc, char** argv) {
       std::vector<cv::Mat> img(rig.cameras.size()), mask(rig.cameras.size());
       for (const auto& [cam, path] : images) {
         const int i = rig.indexOf(rig.camera(cam).name);
-        img[i] = cv::imread(path, cv::IMREAD_UNCHANGED);
-        if (img[i].empty()) throw std::runtime_error(path + ": cannot read image");
+        // A regular file that decodes completely (a JPEG cut short is an error, not grey pixels).
+        img[i] = fm::readImageFile(path, cv::IMREAD_UNCHANGED, "--image " + cam + ":");
         fm::checkImageSize(rig.cameras[i], img[i].cols, img[i].rows);
       }
       for (const auto& [cam, path] : masks) {
         const int i = rig.indexOf(rig.camera(cam).name);
-        mask[i] = cv::imread(path, cv::IMREAD_GRAYSCALE);
-        if (mask[i].empty()) throw std::runtime_error(path + ": cannot read mask");
+        mask[i] = fm::readImageFile(path, cv::IMREAD_GRAYSCALE, "--mask " + cam + ":");
       }
       if (img[ref].empty()) throw std::runtime_error("no --image for the reference camera " + ref_name);
       std::vector<fm::SweepView> views;
@@ -166,11 +174,7 @@ int main(int argc, char** argv) {
     std::vector<std::string> topic_list;
     for (const auto& kv : topic_cam) topic_list.push_back(kv.first);
     rosbag::Bag bag;
-    try {
-      bag.open(one["bag"], rosbag::bagmode::Read);
-    } catch (const rosbag::BagException& e) {
-      throw std::runtime_error(one["bag"] + ": " + e.what());
-    }
+    fm::openBagForReading(bag, one["bag"]);  // a bag cut short: the rosbag reindex command
     rosbag::View view(bag, rosbag::TopicQuery(topic_list));
     const size_t total_msgs = view.size();
     if (total_msgs == 0) throw std::runtime_error(one["bag"] + ": none of the rig's image topics is in the bag");

@@ -31,6 +31,7 @@
 #include "cli.h"
 #include "fisheye_mapping/core/sync/frame_sync.h"
 #include "fisheye_mapping/core/camera/rig.h"
+#include "fisheye_mapping/ros/bag_reading.h"
 #include "fisheye_mapping/ros/conversions.h"
 #include "fisheye_mapping/core/camera/rig_refinement.h"
 
@@ -126,11 +127,7 @@ int main(int argc, char** argv) {
     }
 
     rosbag::Bag bag;
-    try {
-      bag.open(bag_path, rosbag::bagmode::Read);
-    } catch (const std::exception& e) {
-      throw std::runtime_error("cannot open bag " + bag_path + ": " + e.what());
-    }
+    fm::openBagForReading(bag, bag_path);  // a bag cut short: the rosbag reindex command
     std::vector<std::string> topics;
     std::map<std::string, int> cam_of;
     for (int c = 0; c < n_cams; ++c) {

@@ -9,6 +9,7 @@
 #include <cstdlib>
 #include <cstdio>
 #include <iostream>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -59,9 +60,8 @@ bool parseNumbers(const std::string& line, int n, std::vector<double>* out) {
     while (j < line.size() && line[j] != ' ' && line[j] != '\t' && line[j] != '\r') ++j;
     if (static_cast<int>(out->size()) == n) return false;  // too many
     const std::string tok = line.substr(i, j - i);
-    char* end = nullptr;
-    const double v = std::strtod(tok.c_str(), &end);
-    if (end == tok.c_str() || *end != '\0' || !std::isfinite(v)) return false;
+    double v = 0;
+    if (!fm::cli::parseDecimal(tok, &v)) return false;  // decimal only: no 0x10, nan, inf
     out->push_back(v);
     i = j;
   }
@@ -196,7 +196,8 @@ void printSummary(const fm::Rig& rig, double range) {
 
 int main(int argc, char** argv) {
   namespace cli = fm::cli;
-  std::string camchain, mount, psl, size, project_cam, unproject_cam;
+  std::string camchain, mount, psl, size;
+  std::optional<std::string> project_cam, unproject_cam;  // set, even to '', means the filter
   double range = 20.0;
   const int rc = cli::parseCommandLine("rig_info", kUsage, [&] {
     cli::forEachOption(argc, argv, 1, [&](const std::string& arg, const cli::NextValue& value) {
@@ -210,9 +211,9 @@ int main(int argc, char** argv) {
       else return false;
       return true;
     });
-    if (!project_cam.empty() && !unproject_cam.empty()) {
-      throw cli::UsageError("give --project or --unproject, not both");
-    }
+    if (project_cam && unproject_cam) throw cli::UsageError("give --project or --unproject, not both");
+    for (const auto& [opt, cam] : {std::pair{"--project", project_cam}, std::pair{"--unproject", unproject_cam}})
+      if (cam && cam->empty()) throw cli::UsageError(std::string(opt) + " needs a camera name, got ''");
     if (!psl.empty() && (!camchain.empty() || !mount.empty())) {
       throw cli::UsageError("give --camchain and --mount, or --psl and --size, not both");
     }
@@ -234,8 +235,8 @@ int main(int argc, char** argv) {
       cli::requireInputFile("--mount", mount);
       rig = fm::loadKalibrRig(camchain, mount);
     }
-    if (!project_cam.empty()) return runFilter(rig.camera(project_cam), true);
-    if (!unproject_cam.empty()) return runFilter(rig.camera(unproject_cam), false);
+    if (project_cam) return runFilter(rig.camera(*project_cam), true);
+    if (unproject_cam) return runFilter(rig.camera(*unproject_cam), false);
     printSummary(rig, range);
   } catch (const cli::UsageError& e) {
     std::cerr << "rig_info: " << e.what() << "\n";

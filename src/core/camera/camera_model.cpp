@@ -47,6 +47,28 @@ void requireFocal(const char* name, double value) {
   }
 }
 
+// The principal point lies inside the image ([-0.5, side - 0.5]: pixel
+// centres at whole coordinates).
+void requireInsideImage(const char* name, double value, int side, const char* side_name) {
+  requireFinite(name, value);
+  if (value < -0.5 || value > side - 0.5) {
+    std::ostringstream msg;
+    msg << name << " " << value << " is outside the image: the principal point must lie in [-0.5, " << side - 0.5
+        << "] for " << side_name << " " << side;
+    throw std::invalid_argument(msg.str());
+  }
+}
+
+// Square-ish pixels: fx and fy within a factor of kMaxFocalRatio.
+void requireFocalRatio(double fx, double fy) {
+  if (std::max(fx, fy) > kMaxFocalRatio * std::min(fx, fy)) {
+    std::ostringstream msg;
+    msg << "fx " << fx << " and fy " << fy << " differ by more than a factor of " << kMaxFocalRatio
+        << " (fx/fy = " << fx / fy << ")";
+    throw std::invalid_argument(msg.str());
+  }
+}
+
 void requireDistortion(const char* name, double value) { requireWithin(name, value, kMaxDistortionCoeff); }
 
 void requireSize(int width, int height) {
@@ -107,8 +129,11 @@ CameraModel CameraModel::make(CameraModelType type, const Intrinsics& in) {
   requireSize(in.width, in.height);
   requireFocal("fx", in.fx);
   requireFocal("fy", in.fy);
+  requireFocalRatio(in.fx, in.fy);
   requireWithin("cx", in.cx, kMaxPrincipalPoint);
   requireWithin("cy", in.cy, kMaxPrincipalPoint);
+  requireInsideImage("cx", in.cx, in.width, "width");
+  requireInsideImage("cy", in.cy, in.height, "height");
   requireWithin("skew", in.skew, kMaxFocalLength);
   CameraModel cam;
   FmCameraT<double>& p = cam.params_;

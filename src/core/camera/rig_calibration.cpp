@@ -10,6 +10,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include "fisheye_mapping/core/camera/rig.h"
+#include "fisheye_mapping/core/common/safe_open.h"
 
 namespace fisheye_mapping {
 namespace {
@@ -18,29 +19,26 @@ namespace {
   throw CalibrationError(file + ": " + (field.empty() ? "" : field + ": ") + what);
 }
 
-// Calibration files are a few kilobytes; anything this large is not one (and
-// would only cost memory to parse).
-constexpr std::uintmax_t kMaxCalibrationFileBytes = 1u << 20;
-
-// The whole text of a calibration file: it must exist, not be a directory and
-// be small (a pipe such as <(...) works too).
+// The whole text of a calibration file: a regular file (a FIFO or a device is
+// refused at once, without blocking: common/safe_open.h) of at most
+// kMaxCalibrationFileBytes (calibration files are a few kilobytes; anything
+// larger is not one and would only cost memory to parse).
 std::string readCalibrationFile(const std::string& path) {
   namespace fs = std::filesystem;
   std::error_code ec;
   const fs::file_status st = fs::status(path, ec);
   if (ec || !fs::exists(st)) fail(path, "", "cannot open file");
   if (fs::is_directory(st)) fail(path, "", "is a directory, expected a calibration file");
-  std::ifstream f(path, std::ios::binary);
-  if (!f) fail(path, "", "cannot open file");
-  std::string text(kMaxCalibrationFileBytes + 1, '\0');
-  f.read(&text[0], static_cast<std::streamsize>(text.size()));
-  if (f.bad()) fail(path, "", "cannot read file");
-  text.resize(static_cast<size_t>(f.gcount()));
-  if (text.size() > kMaxCalibrationFileBytes) {
-    fail(path, "", "too large for a calibration file (more than " + std::to_string(kMaxCalibrationFileBytes) +
-                       " bytes)");
+  std::uint64_t size = 0;
+  const std::string why = regularFileProblem(path, kMaxCalibrationFileBytes, &size);
+  if (size > kMaxCalibrationFileBytes)
+    fail(path, "", "too large for a calibration file (more than " + std::to_string(kMaxCalibrationFileBytes) + " bytes)");
+  if (!why.empty()) fail(path, "", why + ", expected a calibration file");
+  try {
+    return readRegularFile(path, kMaxCalibrationFileBytes, "");
+  } catch (const std::runtime_error& e) {
+    throw CalibrationError(e.what());
   }
-  return text;
 }
 
 YAML::Node parseYaml(const std::string& text, const std::string& name) {

@@ -6,6 +6,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "fisheye_mapping/core/common/param_table.h"
+#include "fisheye_mapping/core/common/safe_open.h"
 
 namespace fisheye_mapping {
 
@@ -58,8 +59,11 @@ DepthStage::DepthStage(Rig rig, const DepthStageConfig& config) : rig_(std::move
   for (const auto& [name, path] : config.self_masks) {
     const int i = rig_.indexOf(name);
     if (i < 0) throw CalibrationError("~self_masks: no camera '" + name + "' in the rig");
-    masks_[i] = cv::imread(path, cv::IMREAD_GRAYSCALE);
-    if (masks_[i].empty()) throw CalibrationError("~self_masks: cannot read " + path);
+    try {
+      masks_[i] = readImageFile(path, cv::IMREAD_GRAYSCALE, "self mask of " + name);
+    } catch (const std::runtime_error& e) {
+      throw CalibrationError("~self_masks: cannot read " + path + ": " + e.what());
+    }
   }
   sweep_ = std::make_unique<PlaneSweep>(config.sweep);
   if (config.self_calibration.enabled && !supports_.empty()) {

@@ -1,4 +1,5 @@
 #include "fisheye_mapping/core/detection/detector.h"
+#include "fisheye_mapping/core/common/safe_open.h"
 
 #include "fisheye_mapping/core/common/param_table.h"
 
@@ -23,10 +24,9 @@ std::string dirOf(const std::string& path) {
   return slash == std::string::npos ? std::string(".") : path.substr(0, slash);
 }
 
-bool fileExists(const std::string& path) {
-  std::ifstream f(path);
-  return f.good();
-}
+// Why `path` cannot be a model file ("" when it can): a regular file of at
+// most kMaxModelFileBytes, opened without blocking (common/safe_open.h).
+std::string modelFileProblem(const std::string& path) { return regularFileProblem(path, kMaxModelFileBytes); }
 
 std::string number(double v) {
   std::ostringstream s;
@@ -96,8 +96,9 @@ DetectorHead parseHead(const std::string& name) {
 
 DetectorConfig loadDetectorConfig(const std::string& yaml_path) {
   YAML::Node root;
+  const std::string text = readRegularFile(yaml_path, kMaxCalibrationFileBytes, "detector model config");
   try {
-    root = YAML::LoadFile(yaml_path);
+    root = YAML::Load(text);
   } catch (const std::exception& e) {
     throw std::runtime_error("detector model config " + yaml_path + ": " + e.what());
   }
@@ -139,6 +140,8 @@ DetectorConfig loadDetectorConfig(const std::string& yaml_path) {
       c.class_names = names.as<std::vector<std::string>>();
     } else {  // a names file, one class per line (darknet's coco.names)
       const std::string file = resolve(names.as<std::string>());
+      if (const std::string why = regularFileProblem(file, kMaxCalibrationFileBytes); !why.empty())
+        throw fail("class_names", "file " + file + " cannot be read: " + why);
       std::ifstream f(file);
       if (!f) throw fail("class_names", "file " + file + " cannot be read");
       for (std::string line; std::getline(f, line);)
@@ -562,11 +565,12 @@ struct Detector::Impl {
 };
 
 Detector::Detector(const DetectorConfig& cfg, const DnnDevice& device) : cfg_(cfg), impl_(new Impl) {
-  if (!fileExists(cfg.model_path))
-    throw std::runtime_error("detector: model file " + cfg.model_path + " does not exist or cannot be read" +
+  if (const std::string why = modelFileProblem(cfg.model_path); !why.empty())
+    throw std::runtime_error("detector: model file " + cfg.model_path + " does not exist or cannot be read: " + why +
                              (cfg.format == ModelFormat::Onnx ? " (scripts/setup makes the NanoDet model)" : ""));
-  if (cfg.format == ModelFormat::Darknet && !fileExists(cfg.darknet_cfg))
-    throw std::runtime_error("detector: Darknet cfg " + cfg.darknet_cfg + " does not exist or cannot be read");
+  if (cfg.format == ModelFormat::Darknet)
+    if (const std::string why = modelFileProblem(cfg.darknet_cfg); !why.empty())
+      throw std::runtime_error("detector: Darknet cfg " + cfg.darknet_cfg + " does not exist or cannot be read: " + why);
   try {
     impl_->net = cfg.format == ModelFormat::Onnx ? cv::dnn::readNetFromONNX(cfg.model_path)
                                                  : cv::dnn::readNetFromDarknet(cfg.darknet_cfg, cfg.model_path);

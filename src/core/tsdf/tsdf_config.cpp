@@ -49,11 +49,11 @@ const ParamTable<TsdfConfig>& TsdfConfig::params() {
   constexpr auto kRun = ParamChange::Runtime;
   static const ParamTable<TsdfConfig> t = [] {
     ParamTable<TsdfConfig> t("tsdf");
-    t.number("voxel_size", [](TsdfConfig& c) -> double& { return c.voxel_size; }, R::above(0), "m",
+    t.number("voxel_size", [](TsdfConfig& c) -> double& { return c.voxel_size; }, R::aboveUpTo(0, kMaxVoxelSize), "m",
              "Voxel side (the map's geometry: stored in map files)")
-        .number("truncation_voxels", [](TsdfConfig& c) -> double& { return c.truncation_voxels; }, R::above(0),
+        .number("truncation_voxels", [](TsdfConfig& c) -> double& { return c.truncation_voxels; }, R::aboveUpTo(0, kMaxTruncationVoxels),
                 "voxels", "Truncation distance mu in voxels (mu = truncation_voxels x voxel_size)")
-        .number("max_weight", [](TsdfConfig& c) -> float& { return c.max_weight; }, R::above(0), "",
+        .number("max_weight", [](TsdfConfig& c) -> float& { return c.max_weight; }, R::aboveUpTo(0, kMaxMapWeight), "",
                 "Cap of the per-voxel observation count (written into map files)")
         .number("min_observations", [](TsdfConfig& c) -> int& { return c.min_observations; }, R::atLeast(1), "",
                 "Mesh and cloud keep voxels observed at least this often (a change re-meshes the map)", kRun)

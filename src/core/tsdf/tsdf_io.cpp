@@ -48,6 +48,9 @@
 
 #include <zlib.h>
 
+#include "fisheye_mapping/core/common/safe_open.h"
+#include "fisheye_mapping/core/tsdf/tsdf_config.h"
+
 namespace fisheye_mapping {
 namespace {
 
@@ -94,6 +97,12 @@ T readAt(const char* p) {
 }
 
 // Parses and checks the header in `bytes` (at least kHeaderV1 long).
+std::string formatHeaderNumber(double v) {
+  std::ostringstream s;
+  s << v;
+  return s.str();
+}
+
 MapFileInfo parseHeader(const std::string& path, const char* bytes, size_t available, uint64_t file_size) {
   MapFileInfo info;
   info.file_size = file_size;
@@ -110,8 +119,9 @@ MapFileInfo parseHeader(const std::string& path, const char* bytes, size_t avail
     if (crc32(bytes, 40) != readAt<uint32_t>(bytes + 40)) {
       fail(path, "header checksum mismatch (the header is damaged)");
     }
-    if (!(info.max_weight > 0.0f) || !std::isfinite(info.max_weight)) {
-      fail(path, "bad header: max_weight " + std::to_string(info.max_weight));
+    if (!(info.max_weight > 0.0f) || !std::isfinite(info.max_weight) || info.max_weight > kMaxMapWeight) {
+      fail(path, "bad header: max_weight " + std::to_string(info.max_weight) + " (must lie in (0, " +
+                     formatHeaderNumber(kMaxMapWeight) + "])");
     }
   } else if (info.version != 1) {
     fail(path, "not a fisheye_mapping TSDF map (bad header: unknown version " + std::to_string(info.version) + ")");
@@ -120,6 +130,13 @@ MapFileInfo parseHeader(const std::string& path, const char* bytes, size_t avail
       !std::isfinite(info.truncation_voxels)) {
     fail(path, "not a fisheye_mapping TSDF map (bad header: voxel size or truncation)");
   }
+  // The ranges of the tsdf parameters (tsdf_config.h): what the nodelet accepts.
+  if (info.voxel_size > kMaxVoxelSize)
+    fail(path, "bad header: voxel_size " + formatHeaderNumber(info.voxel_size) + " m (must lie in (0, " +
+                   formatHeaderNumber(kMaxVoxelSize) + "] m)");
+  if (info.truncation_voxels > kMaxTruncationVoxels)
+    fail(path, "bad header: truncation_voxels " + formatHeaderNumber(info.truncation_voxels) + " (must lie in (0, " +
+                   formatHeaderNumber(kMaxTruncationVoxels) + "] voxels)");
   return info;
 }
 
@@ -409,6 +426,8 @@ void appendRecordV3(const BlockIndex& b, const VoxelBlock& blk, std::vector<char
 MapFileInfo readMapFileHeader(const std::string& path) {
   std::error_code ec;
   if (std::filesystem::is_directory(path, ec)) fail(path, "is a directory, not a map file");
+  // A FIFO or a device would block or stream without end (common/safe_open.h).
+  if (const std::string why = regularFileProblem(path, kMaxMapFileBytes); !why.empty()) fail(path, why + ", not a map file");
   std::ifstream f(path, std::ios::binary);
   if (!f) fail(path, std::string("cannot open map file (") + std::strerror(errno) + ")");
   const uint64_t size = std::filesystem::file_size(path, ec);

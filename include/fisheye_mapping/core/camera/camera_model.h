@@ -29,6 +29,7 @@ enum class CameraModelType {
 constexpr int kMaxImageSide = 20000;            // pixels, width and height
 constexpr double kMaxFocalLength = 1e6;         // pixels: fx, fy in (0, 1e6]; |skew| too
 constexpr double kMaxPrincipalPoint = 1e6;      // pixels: |cx|, |cy|
+constexpr double kMaxFocalRatio = 10;           // fx/fy and fy/fx at most; cx, cy inside the image
 constexpr double kMaxDistortionCoeff = 1e3;     // |k1..k4|, |p1|, |p2|
 constexpr double kMaxUnifiedXi = 1e3;           // unified xi in [0, 1e3]
 // project() returns false for points farther than this along any axis

@@ -22,6 +22,16 @@
 // happened) are dropped as stale until that camera's stamps join the new
 // timeline. A clock that jumps backwards under the stream (clockAt(): the ROS
 // clock under sim time) resets the same way.
+//
+// Every frame set is accounted for (Stats::sets*): each frame set the images
+// make up is either complete or dropped for one reason, counted once: stamps
+// backwards (an image older than the last published set), duplicate stamp (a
+// camera's image with the stamp of its previous one), incomplete (an open set
+// that can no longer complete, or is open at finish()) or stale (an old
+// timeline's straggler). A dropped image that fits a frame set already
+// dropped (the late image of a set dropped as incomplete, the other cameras
+// of a duplicated stamp) joins that set and is not counted again, so
+// complete + the drops = the frame sets in the stream.
 #ifndef FISHEYE_MAPPING_CORE_SYNC_FRAME_SYNC_H_
 #define FISHEYE_MAPPING_CORE_SYNC_FRAME_SYNC_H_
 
@@ -95,10 +105,27 @@ class FrameSetSync {
     int count = 0;
   };
   struct Stats {
-    std::uint64_t complete = 0, dropped_incomplete = 0, dropped_out_of_order = 0;
+    std::uint64_t complete = 0;            ///< frame sets published
+    std::uint64_t dropped_incomplete = 0;  ///< frame sets that could no longer complete
+    std::uint64_t dropped_out_of_order = 0;  ///< images older than the last published set, or duplicates
     std::uint64_t time_resets = 0;    ///< timelines restarted (time went backwards)
     std::uint64_t dropped_stale = 0;  ///< images of an old timeline after a reset
+    // Frame sets dropped, by reason (each counted once; see the file comment).
+    std::uint64_t sets_backwards = 0;  ///< stamps went backwards (older than the last published set)
+    std::uint64_t sets_duplicate = 0;  ///< a camera repeated its previous stamp
+    std::uint64_t sets_stale = 0;      ///< of an old timeline, after a time reset
+    /// Frame sets dropped for any reason (incomplete included).
+    std::uint64_t setsDropped() const { return dropped_incomplete + sets_backwards + sets_duplicate + sets_stale; }
+    /// Every frame set seen: complete + setsDropped().
+    std::uint64_t sets() const { return complete + setsDropped(); }
+    Stats& operator+=(const Stats& o) {
+      complete += o.complete, dropped_incomplete += o.dropped_incomplete, dropped_out_of_order += o.dropped_out_of_order;
+      time_resets += o.time_resets, dropped_stale += o.dropped_stale;
+      sets_backwards += o.sets_backwards, sets_duplicate += o.sets_duplicate, sets_stale += o.sets_stale;
+      return *this;
+    }
   };
+  enum class Drop { kBackwards, kDuplicate, kStale };
   struct TimeReset {
     std::int64_t from_ns = 0, to_ns = 0;  ///< newest stamp before, the stamp (or clock) after
     std::string reason;                   ///< includes the open sets dropped
@@ -112,6 +139,7 @@ class FrameSetSync {
         policy_(policy),
         max_interval_ns_(std::int64_t(max_interval_s * 1e9)),
         queue_(queue_size),
+        last_stamp_(std::max(0, cameras)),
         timeline_(std::max(1, cameras), time_reset_s) {
     if (cameras < 1) throw std::invalid_argument("frame sync: need at least one camera");
     if (queue_size < 1) throw std::invalid_argument("frame sync: queue size must be >= 1");
@@ -125,30 +153,36 @@ class FrameSetSync {
     const StreamTimeline::Event ev = timeline_.observe(cam, stamp_ns);
     if (ev.kind == StreamTimeline::Kind::kStale) {
       ++stats_.dropped_stale;
+      dropImage(cam, stamp_ns, Drop::kStale);
       return out;
     }
     if (ev.kind == StreamTimeline::Kind::kReset) timeReset(ev, "camera " + std::to_string(cam) + ": ");
-    if (last_published_ && stamp_ns <= *last_published_ - (policy_ == SyncPolicy::Exact ? 0 : max_interval_ns_)) {
+    const bool duplicate = last_stamp_[cam] && *last_stamp_[cam] == stamp_ns;
+    last_stamp_[cam] = last_stamp_[cam] ? std::max(*last_stamp_[cam], stamp_ns) : stamp_ns;
+    if (duplicate) {
       ++stats_.dropped_out_of_order;
+      dropImage(cam, stamp_ns, Drop::kDuplicate);
       return out;
     }
-    Set* target = nullptr;
-    for (auto& s : open_) {
-      if (s.items[cam]) continue;
-      const std::int64_t d = std::llabs(stamp_ns - s.stamp_ns);
-      if ((policy_ == SyncPolicy::Exact && d == 0) || (policy_ == SyncPolicy::Approximate && d <= max_interval_ns_)) {
-        target = &s;
-        break;
-      }
+    if (last_published_ && stamp_ns <= *last_published_ - (policy_ == SyncPolicy::Exact ? 0 : max_interval_ns_)) {
+      ++stats_.dropped_out_of_order;
+      dropImage(cam, stamp_ns, Drop::kBackwards);
+      return out;
     }
-    if (!target) {
+    auto target = open_.end();
+    for (auto it = open_.begin(); it != open_.end(); ++it) {
+      if (it->items[cam] || !matches(it->stamp_ns, stamp_ns)) continue;
+      target = it;
+      break;
+    }
+    if (target == open_.end()) {
       Set s;
       s.stamp_ns = stamp_ns;
       s.items.resize(n_);
       // Keep the open sets ordered by stamp.
       auto it = open_.begin();
       while (it != open_.end() && it->stamp_ns <= stamp_ns) ++it;
-      target = &*open_.insert(it, std::move(s));
+      target = open_.insert(it, std::move(s));
     }
     target->items[cam] = std::move(item);
     ++target->count;
@@ -158,19 +192,20 @@ class FrameSetSync {
       items.reserve(n_);
       for (auto& i : target->items) items.push_back(std::move(*i));
       out.push_back(std::move(items));
+      open_.erase(target);
       // Everything opened before the completed set can no longer complete.
-      while (!open_.empty() && open_.front().stamp_ns <= done) {
-        if (open_.front().stamp_ns != done) ++stats_.dropped_incomplete;
-        open_.pop_front();
-      }
+      while (!open_.empty() && open_.front().stamp_ns <= done) dropOpenFront();
       last_published_ = done;
       ++stats_.complete;
     }
-    while (open_.size() > queue_) {
-      open_.pop_front();
-      ++stats_.dropped_incomplete;
-    }
+    while (open_.size() > queue_) dropOpenFront();
     return out;
+  }
+
+  /// The end of the stream (a bag read to its end): the open sets can no
+  /// longer complete and are counted as incomplete.
+  void finish() {
+    while (!open_.empty()) dropOpenFront();
   }
 
   /// The clock now (ROS time under sim time; not zero): resets when the newest
@@ -186,9 +221,9 @@ class FrameSetSync {
   /// Forgets the open sets (counted as incomplete) and every stamp seen, as if
   /// just constructed; the counts are kept.
   void reset() {
-    stats_.dropped_incomplete += open_.size();
-    open_.clear();
+    finish();
     last_published_.reset();
+    std::fill(last_stamp_.begin(), last_stamp_.end(), std::nullopt);
     timeline_.reset();
   }
 
@@ -198,10 +233,50 @@ class FrameSetSync {
   const std::optional<TimeReset>& lastTimeReset() const { return last_reset_; }
 
  private:
+  // Images of one frame set: equal stamps (exact) or within max_interval.
+  bool matches(std::int64_t set_ns, std::int64_t stamp_ns) const {
+    const std::int64_t d = std::llabs(stamp_ns - set_ns);
+    return policy_ == SyncPolicy::Exact ? d == 0 : d <= max_interval_ns_;
+  }
+
+  // A frame set dropped: its stamp and the cameras whose images it had.
+  struct DroppedSet {
+    std::int64_t stamp_ns;
+    std::vector<bool> cams;
+  };
+  void remember(DroppedSet d) {
+    dropped_.push_back(std::move(d));
+    while (dropped_.size() > queue_ + std::size_t(n_)) dropped_.pop_front();
+  }
+
+  // The oldest open set can no longer complete: counted as incomplete.
+  void dropOpenFront() {
+    DroppedSet d{open_.front().stamp_ns, std::vector<bool>(n_)};
+    for (int c = 0; c < n_; ++c) d.cams[c] = bool(open_.front().items[c]);
+    open_.pop_front();
+    ++stats_.dropped_incomplete;
+    remember(std::move(d));
+  }
+
+  // An image dropped: it joins a dropped frame set that lacks its camera, or
+  // is the first image of a frame set dropped for `why`.
+  void dropImage(int cam, std::int64_t stamp_ns, Drop why) {
+    for (auto it = dropped_.rbegin(); it != dropped_.rend(); ++it) {
+      if (it->cams[cam] || !matches(it->stamp_ns, stamp_ns)) continue;
+      it->cams[cam] = true;
+      return;
+    }
+    DroppedSet d{stamp_ns, std::vector<bool>(n_)};
+    d.cams[cam] = true;
+    remember(std::move(d));
+    ++(why == Drop::kBackwards ? stats_.sets_backwards : why == Drop::kDuplicate ? stats_.sets_duplicate
+                                                                                 : stats_.sets_stale);
+  }
+
   void timeReset(const StreamTimeline::Event& ev, const std::string& who) {
     const std::size_t dropped = open_.size();
-    stats_.dropped_incomplete += dropped;
-    open_.clear();
+    finish();  // kept among the dropped sets: the old timeline's stragglers join them
+    std::fill(last_stamp_.begin(), last_stamp_.end(), std::nullopt);
     last_published_.reset();
     ++stats_.time_resets;
     last_reset_ = TimeReset{ev.from_ns, ev.to_ns,
@@ -213,6 +288,8 @@ class FrameSetSync {
   std::int64_t max_interval_ns_;
   std::size_t queue_;
   std::deque<Set> open_;
+  std::deque<DroppedSet> dropped_;  // the latest frame sets dropped
+  std::vector<std::optional<std::int64_t>> last_stamp_;  // each camera's newest stamp
   std::optional<std::int64_t> last_published_;
   StreamTimeline timeline_;
   std::optional<TimeReset> last_reset_;

@@ -42,6 +42,13 @@ enum class MeshColoring {
 MeshColoring parseMeshColoring(const std::string& name);
 const char* toString(MeshColoring coloring);
 
+// The map's geometry: the ranges of the parameters below and of a map file's
+// header (TsdfMap::readHeader refuses a file outside them, so map_tool and the
+// nodelet agree on what a valid map is).
+constexpr double kMaxVoxelSize = 10.0;          ///< m: voxel_size in (0, 10]
+constexpr double kMaxTruncationVoxels = 1000.0;  ///< truncation_voxels in (0, 1000]
+constexpr double kMaxMapWeight = 1e6;           ///< max_weight in (0, 1e6]
+
 struct TsdfConfig {
   double voxel_size = 0.05;        // metres
   double truncation_voxels = 4.0;  // mu = truncation_voxels * voxel_size
