@@ -3,5 +3,6 @@ set(FM_COMMON_SOURCES
   opencl_context.cpp
   param_table.cpp
   paths.cpp
+  safe_write.cpp
   stage_stats.cpp
 )
