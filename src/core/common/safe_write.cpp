@@ -51,8 +51,9 @@ std::string confineSavePath(const std::string& requested, const SaveFolder& fold
   const fs::path parent = resolvedParent(lexical.parent_path());
   const bool inside = isInside(parent, root);
   if (!inside && !folder.allow_any_path) {
-    throw std::invalid_argument("save path '" + requested + "' (" + (parent / lexical.filename()).string() +
-                                ") is outside the save folder " + root.string() +
+    const std::string where = (parent / lexical.filename()).string();
+    throw std::invalid_argument("save path '" + requested + "'" + (where == requested ? "" : " (" + where + ")") +
+                                " is outside the save folder " + root.string() +
                                 ": give a path inside it (a relative path is taken inside it); writing anywhere "
                                 "else needs allow_any_save_path (unsafe)");
   }
