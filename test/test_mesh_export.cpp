@@ -6,6 +6,10 @@
 // faces, in opposite directions; Euler characteristic 2); colours and the
 // hand-built meshes are checked against hand-computed values; the PLY is read
 // back by its own header.
+#include <signal.h>
+#include <sys/resource.h>
+#include <sys/stat.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -324,6 +328,64 @@ TEST_F(SphereMesh, PlyFileReadsBack) {
   EXPECT_EQ(plain.find("red"), std::string::npos);
   EXPECT_NE(plain.find("property float nx"), std::string::npos);
   EXPECT_THROW(mesher_->saveMeshPly(dir + "/no/such/dir/m.ply"), std::runtime_error);
+  fs::remove_all(dir);
+}
+
+// The exports through the checked writer (issue 28): a link at the target is
+// replaced, its target untouched; a FIFO is refused at once; a write that
+// fails part-way (a file-size limit, as a full disk) throws naming the file
+// and keeps the old one, with no temporary left.
+TEST_F(SphereMesh, SavesNeverFollowALinkAndFailedWritesKeepTheOldFile) {
+  char tmpl[] = "/tmp/fm_mesh_safe_XXXXXX";
+  const std::string dir = mkdtemp(tmpl);
+  std::ofstream(dir + "/victim") << "precious";
+  fs::create_symlink(dir + "/victim", dir + "/mesh.ply");
+  fs::create_symlink(dir + "/victim", dir + "/cloud.pcd");
+  mesher_->saveMeshPly(dir + "/mesh.ply");
+  mesher_->saveCloudPcd(dir + "/cloud.pcd");
+  EXPECT_EQ(readBytes(dir + "/victim"), "precious");
+  EXPECT_FALSE(fs::is_symlink(dir + "/mesh.ply"));
+  EXPECT_EQ(readBytes(dir + "/mesh.ply").substr(0, 4), "ply\n");
+  EXPECT_EQ(readBytes(dir + "/cloud.pcd").substr(0, 6), "# .PCD");
+
+  ASSERT_EQ(mkfifo((dir + "/pipe.ply").c_str(), 0644), 0);
+  try {
+    mesher_->saveMeshPly(dir + "/pipe.ply");
+    ADD_FAILURE() << "saved into a FIFO";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find(dir + "/pipe.ply: is a FIFO"), std::string::npos) << e.what();
+  }
+  EXPECT_TRUE(fs::is_fifo(dir + "/pipe.ply"));
+
+  const std::string mesh_before = readBytes(dir + "/mesh.ply"), cloud_before = readBytes(dir + "/cloud.pcd");
+  ASSERT_GT(mesh_before.size(), 64u * 1024);
+  ASSERT_GT(cloud_before.size(), 16u * 1024);
+  struct rlimit old_limit;
+  ASSERT_EQ(getrlimit(RLIMIT_FSIZE, &old_limit), 0);
+  struct rlimit small = old_limit;
+  small.rlim_cur = 16 * 1024;
+  signal(SIGXFSZ, SIG_IGN);  // writes then fail with EFBIG
+  ASSERT_EQ(setrlimit(RLIMIT_FSIZE, &small), 0);
+  std::string mesh_error, cloud_error;
+  try {
+    mesher_->saveMeshPly(dir + "/mesh.ply");
+  } catch (const std::runtime_error& e) {
+    mesh_error = e.what();
+  }
+  try {
+    mesher_->saveCloudPcd(dir + "/cloud.pcd");
+  } catch (const std::runtime_error& e) {
+    cloud_error = e.what();
+  }
+  setrlimit(RLIMIT_FSIZE, &old_limit);
+  signal(SIGXFSZ, SIG_DFL);
+  EXPECT_NE(mesh_error.find(dir + "/mesh.ply"), std::string::npos) << "no error: " << mesh_error;
+  EXPECT_NE(cloud_error.find(dir + "/cloud.pcd"), std::string::npos) << "no error: " << cloud_error;
+  EXPECT_EQ(readBytes(dir + "/mesh.ply"), mesh_before);
+  EXPECT_EQ(readBytes(dir + "/cloud.pcd"), cloud_before);
+  std::set<std::string> names;
+  for (const auto& e : fs::directory_iterator(dir)) names.insert(e.path().filename().string());
+  EXPECT_EQ(names, (std::set<std::string>{"cloud.pcd", "mesh.ply", "pipe.ply", "victim"}));
   fs::remove_all(dir);
 }
 

@@ -228,7 +228,7 @@ TEST(OfflineMapper, MapsADriveAndWritesTimings) {
   EXPECT_NE(full_run.find("| cam1 | 0.000 |"), std::string::npos) << full_run;
   EXPECT_EQ(full_run.find("self_calibrated_camchain.yaml"), std::string::npos) << full_run;
   // No temporary file is left behind.
-  EXPECT_EQ(run("ls " + kDir + "/map | grep -c partial", &rc), "0\n");
+  EXPECT_EQ(run("ls -A " + kDir + "/map | grep -c '\\.tmp\\.'", &rc), "0\n");
 
   // Bad options: named, exit status 2, nothing mapped and the earlier outputs untouched.
   const std::string base =

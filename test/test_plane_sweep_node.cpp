@@ -9,6 +9,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 #include <algorithm>
+#include <cstdlib>
 #include <filesystem>
 #include <map>
 #include <mutex>
@@ -449,15 +450,20 @@ TEST(PlaneSweepDepthNode, SelfCalibrationStateAndSaveService) {
     // The rig is exact: whatever the evidence, no correction beyond the noise.
     EXPECT_LT(cam.correction_deg, 0.1) << cam.status;
   }
-  const std::string dir = "/tmp/fm_test_plane_sweep_node_" + std::to_string(getpid());
-  std::filesystem::create_directories(dir);
+  // Inside the save folder ($ROS_HOME/fisheye_mapping): a relative path.
+  const char* ros_home = std::getenv("ROS_HOME");
+  const std::filesystem::path folder =
+      std::filesystem::path(ros_home && *ros_home ? ros_home : std::string(std::getenv("HOME")) + "/.ros") /
+      "fisheye_mapping";
+  const std::string subfolder = "fm_test_plane_sweep_node_" + std::to_string(getpid());
   fisheye_mapping::FilePath srv;
-  srv.request.path = dir + "/camchain.yaml";
+  srv.request.path = subfolder + "/camchain.yaml";
   ASSERT_TRUE(ros::service::waitForService("plane_sweep/save_calibration", ros::Duration(10.0)));
   for (int k = 0; k < 2; ++k) {
     ASSERT_TRUE(ros::service::call("plane_sweep/save_calibration", srv));
     EXPECT_TRUE(srv.response.success) << srv.response.message;
   }
+  const std::string dir = std::filesystem::canonical(folder / subfolder).string();
   EXPECT_NE(srv.response.message.find(dir + "/camchain.yaml"), std::string::npos) << srv.response.message;
   EXPECT_TRUE(std::filesystem::exists(dir + "/camchain.yaml.1"));
   const fm::Rig saved = fm::loadKalibrRig(dir + "/camchain.yaml", dir + "/camchain_mount.yaml");
@@ -471,6 +477,15 @@ TEST(PlaneSweepDepthNode, SelfCalibrationStateAndSaveService) {
   ASSERT_TRUE(ros::service::call("plane_sweep/save_calibration", srv));
   EXPECT_FALSE(srv.response.success);
   EXPECT_NE(srv.response.message.find(dir), std::string::npos) << srv.response.message;
+  // Outside the save folder: refused naming it, nothing written there.
+  const std::string outside = "/tmp/fm_test_plane_sweep_outside_" + std::to_string(getpid()) + ".yaml";
+  srv.request.path = outside;
+  ASSERT_TRUE(ros::service::call("plane_sweep/save_calibration", srv));
+  EXPECT_FALSE(srv.response.success);
+  EXPECT_NE(srv.response.message.find("outside the save folder " + std::filesystem::canonical(folder).string()),
+            std::string::npos)
+      << srv.response.message;
+  EXPECT_FALSE(std::filesystem::exists(outside));
   std::filesystem::remove_all(dir);
 }
 

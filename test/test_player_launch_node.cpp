@@ -173,7 +173,7 @@ TEST_F(PlayerLaunch, APlayerThatStopsOnBadInputEndsTheLaunchAndTheMapIsSaved) {
   const std::string map = dir_ + "/map.tsdf", summary = dir_ + "/summary.yaml", log = dir_ + "/roslaunch.log";
   const std::string launch = "roslaunch fisheye_mapping vehicle.launch rviz:=false detector:=ground_truth bag:=" + bag +
                              kRig + " summary_file:=" + summary + " config:=" +
-                             config("", "  save_map_on_shutdown: " + map + "\n") + " > " + log + " 2>&1";
+                             config("", "  save_directory: " + dir_ + "\n  save_map_on_shutdown: " + map + "\n") + " > " + log + " 2>&1";
   const pid_t pid = spawn(launch);
   ASSERT_GT(pid, 0);
   const int status = waitExit(pid, 150.0);

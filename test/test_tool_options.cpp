@@ -3,10 +3,12 @@
 // the tool does no work; every tool answers --help with its full usage on
 // stdout (exit 0) and an unknown option with its name on stderr (exit 2).
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <string>
 #include <vector>
@@ -82,19 +84,23 @@ TEST(Cli, FilesFoldersAndAtomicWrites) {
   cli::prepareOutputDir("--out", dir + "/new/deep");
   // A failed write keeps the old file and leaves no temporary.
   std::ofstream(dir + "/keep.txt") << "old\n";
-  EXPECT_THROW(cli::writeAtomically(dir + "/keep.txt",
-                                    [](const std::string& tmp) {
-                                      std::ofstream(tmp) << "half";
-                                      throw std::runtime_error("failed");
-                                    }),
+  EXPECT_THROW(cli::writeTextAtomically(dir + "/keep.txt",
+                                        [](std::ostream& f) {
+                                          f << "half";
+                                          throw std::runtime_error("failed");
+                                        }),
                std::runtime_error);
   std::ifstream keep(dir + "/keep.txt");
   std::string line;
   std::getline(keep, line);
   EXPECT_EQ(line, "old");
-  EXPECT_FALSE(std::ifstream(cli::partialName(dir + "/keep.txt")).good());
-  // A writer that writes nothing does not count as written.
-  EXPECT_THROW(cli::writeAtomically(dir + "/none.txt", [](const std::string&) {}), std::runtime_error);
+  size_t files = 0;
+  for (const auto& e : std::filesystem::directory_iterator(dir)) files += e.is_regular_file();
+  EXPECT_EQ(files, 2u);  // file, keep.txt
+  // A FIFO is refused (not blocked on) and stays.
+  ASSERT_EQ(mkfifo((dir + "/pipe.csv").c_str(), 0644), 0);
+  EXPECT_THROW(cli::writeTextAtomically(dir + "/pipe.csv", [](std::ostream& f) { f << "x"; }), std::runtime_error);
+  EXPECT_TRUE(std::filesystem::is_fifo(dir + "/pipe.csv"));
   cli::writeTextAtomically(dir + "/keep.txt", [](std::ostream& f) { f << "new\n"; });
   std::ifstream now(dir + "/keep.txt");
   std::getline(now, line);

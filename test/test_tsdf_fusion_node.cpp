@@ -2,7 +2,9 @@
 // poses come over tf; mesh and cloud arrive in the map frame and lie on the
 // true surfaces; bad frames are skipped and counted in /diagnostics; the
 // mesh stream keeps rviz's rules over the whole run; the services save, load
-// and clear, with relative paths under $ROS_HOME; max_range changes at run
+// and clear, with relative paths inside the save folder ($ROS_HOME/
+// fisheye_mapping) and refuse paths outside it, FIFOs, and links followed
+// (issue 28); max_range changes at run
 // time through dynamic_reconfigure; with ~rig_source camera_info the camera
 // model comes from depth_masked/camera_info and the map is the same.
 #include <sys/stat.h>
@@ -133,6 +135,20 @@ std::string diagValue(const std::string& key) {
 std::string rosHome() {
   const char* h = std::getenv("ROS_HOME");
   return h && *h ? std::string(h) : std::string(std::getenv("HOME")) + "/.ros";
+}
+
+// The nodes' save folder (~save_directory's default), made and resolved.
+std::string saveFolder() {
+  const std::filesystem::path dir = std::filesystem::path(rosHome()) / "fisheye_mapping";
+  std::filesystem::create_directories(dir);
+  return std::filesystem::canonical(dir).string();
+}
+
+std::string fileBytes(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  std::ostringstream s;
+  s << f.rdbuf();
+  return s.str();
 }
 
 
@@ -348,9 +364,9 @@ TEST_F(TsdfFusionNode, FusesFramesAndServesTheMap) {
   EXPECT_GE(late_triangles, triangles);
   late_sub.shutdown();
 
-  // Services.
-  char tmpl[] = "/tmp/fm_tsdf_node_XXXXXX";
-  const std::string dir = mkdtemp(tmpl);
+  // Services: into a folder inside the save folder.
+  std::string tmpl = saveFolder() + "/fm_tsdf_node_XXXXXX";
+  const std::string dir = mkdtemp(&tmpl[0]);
   fisheye_mapping::FilePath srv;
   srv.request.path = dir + "/mesh.ply";
   ASSERT_TRUE(ros::service::call("/tsdf/save_mesh", srv));
@@ -374,15 +390,57 @@ TEST_F(TsdfFusionNode, FusesFramesAndServesTheMap) {
   ASSERT_TRUE(ros::service::call("/tsdf/save_mesh", srv));
   EXPECT_FALSE(srv.response.success);
   EXPECT_NE(srv.response.message.find("empty"), std::string::npos) << srv.response.message;
-  // A relative path lands under $ROS_HOME, at the absolute path the answer gives.
+  // A relative path lands inside the save folder ($ROS_HOME/fisheye_mapping),
+  // at the absolute path the answer gives.
   const std::string relative = "fm_tsdf_node_test_" + std::to_string(getpid()) + ".ply";
-  const std::string expected = (std::filesystem::path(rosHome()) / relative).lexically_normal().string();
+  const std::string expected = saveFolder() + "/" + relative;
   srv.request.path = relative;
   ASSERT_TRUE(ros::service::call("/tsdf/save_mesh", srv));
   EXPECT_TRUE(srv.response.success) << srv.response.message;
   EXPECT_NE(srv.response.message.find(" " + expected + ":"), std::string::npos) << srv.response.message;
   EXPECT_EQ(stat(expected.c_str(), &st), 0) << expected;
   std::remove(expected.c_str());
+
+  // Outside the save folder: refused by every save service, naming the
+  // folder; the file there keeps its bytes, no new file appears (issue 28).
+  char out_tmpl[] = "/tmp/fm_tsdf_outside_XXXXXX";
+  const std::string outside = mkdtemp(out_tmpl);
+  std::ofstream(outside + "/victim.ply") << "precious";
+  for (const char* service : {"save_mesh", "save_cloud", "save_map"}) {
+    for (const std::string& path : {outside + "/victim.ply", outside + "/new.file"}) {
+      srv.request.path = path;
+      ASSERT_TRUE(ros::service::call(std::string("/tsdf/") + service, srv));
+      EXPECT_FALSE(srv.response.success) << service << " " << path << ": " << srv.response.message;
+      EXPECT_NE(srv.response.message.find("outside the save folder " + saveFolder()), std::string::npos)
+          << srv.response.message;
+    }
+  }
+  EXPECT_EQ(fileBytes(outside + "/victim.ply"), "precious");
+  EXPECT_FALSE(std::filesystem::exists(outside + "/new.file"));
+  // ".." out of the folder: refused, nothing written beside it.
+  const std::string escape = "fm_tsdf_escape_" + std::to_string(getpid()) + ".ply";
+  srv.request.path = "../" + escape;
+  ASSERT_TRUE(ros::service::call("/tsdf/save_mesh", srv));
+  EXPECT_FALSE(srv.response.success) << srv.response.message;
+  EXPECT_NE(srv.response.message.find("outside the save folder"), std::string::npos) << srv.response.message;
+  EXPECT_FALSE(std::filesystem::exists(std::filesystem::path(saveFolder()).parent_path() / escape));
+  // A link inside the folder to a file outside: replaced by the mesh, never
+  // followed (the file outside keeps its bytes).
+  std::filesystem::create_symlink(outside + "/victim.ply", dir + "/link.ply");
+  srv.request.path = dir + "/link.ply";
+  ASSERT_TRUE(ros::service::call("/tsdf/save_mesh", srv));
+  EXPECT_TRUE(srv.response.success) << srv.response.message;
+  EXPECT_FALSE(std::filesystem::is_symlink(dir + "/link.ply"));
+  EXPECT_EQ(fileBytes(dir + "/link.ply").substr(0, 4), "ply\n");
+  EXPECT_EQ(fileBytes(outside + "/victim.ply"), "precious");
+  // A FIFO at the target: refused at once (no blocking), left as it is.
+  ASSERT_EQ(mkfifo((dir + "/pipe.pcd").c_str(), 0644), 0);
+  srv.request.path = dir + "/pipe.pcd";
+  ASSERT_TRUE(ros::service::call("/tsdf/save_cloud", srv));
+  EXPECT_FALSE(srv.response.success) << srv.response.message;
+  EXPECT_NE(srv.response.message.find("is a FIFO, not a regular file"), std::string::npos) << srv.response.message;
+  EXPECT_TRUE(std::filesystem::is_fifo(dir + "/pipe.pcd"));
+  std::filesystem::remove_all(outside);
 
   std_srvs::Trigger clear;
   ASSERT_TRUE(ros::service::call("/tsdf/clear_map", clear));

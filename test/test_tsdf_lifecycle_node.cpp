@@ -83,6 +83,10 @@ std::map<std::tuple<int, int, int>, fm::VoxelBlock> loadBlocks(const std::string
 
 // One TsdfFusion in its own process (`nodelet standalone`), named `name`,
 // its topics prefixed with the name.
+// Its ~save_directory (the test's folder; set by the fixture): the
+// shutdown/autosave and service paths below lie in it.
+std::string g_save_directory;
+
 class FusionProcess {
  public:
   FusionProcess(const std::string& name, const std::map<std::string, XmlRpc::XmlRpcValue>& params) : name_(name) {
@@ -91,6 +95,7 @@ class FusionProcess {
     ros::param::set("/" + name + "/camchain", data + "small_fisheye_camchain.yaml");
     ros::param::set("/" + name + "/mount", data + "small_fisheye_mount.yaml");
     ros::param::set("/" + name + "/publish_period", 0.2);
+    ros::param::set("/" + name + "/save_directory", g_save_directory);
     for (const auto& kv : params) ros::param::set("/" + name + "/" + kv.first, kv.second);
     const std::vector<std::string> args = {"rosrun", "nodelet", "nodelet", "standalone", "fisheye_mapping/TsdfFusion",
                                            "__name:=" + name, "depth_masked/image:=/" + name + "/depth_in",
@@ -150,6 +155,7 @@ class TsdfLifecycle : public ::testing::Test {
     rig_ = fm::loadKalibrRig(data + "small_fisheye_camchain.yaml", data + "small_fisheye_mount.yaml");
     char tmpl[] = "/tmp/fm_tsdf_lifecycle_XXXXXX";
     dir_ = mkdtemp(tmpl);
+    g_save_directory = dir_;
     spinner_.start();
     diag_sub_ = nh_.subscribe<diagnostic_msgs::DiagnosticArray>(
         "/diagnostics", 50, boost::function<void(const diagnostic_msgs::DiagnosticArrayConstPtr&)>([this](const auto& m) {

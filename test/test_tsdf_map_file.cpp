@@ -8,6 +8,7 @@
 // are read back here with zlib by their documented layout, record by record.
 #include <signal.h>
 #include <sys/resource.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 
 #include <cmath>
@@ -681,6 +682,28 @@ TEST_F(MapFile, FailedSavesLeaveNothingBehind) {
   EXPECT_NE(msg.find("write failed"), std::string::npos) << msg;
   EXPECT_EQ(listing(d), (std::set<std::string>{"map.fmtsdf", "sub"}));
   EXPECT_EQ(readBytes(d + "/map.fmtsdf"), *good_);
+  fs::remove_all(d);
+}
+
+// A link at the map's path is replaced by the map, its target untouched; a
+// FIFO there is refused at once and stays (issue 28).
+TEST_F(MapFile, SavesNeverFollowALinkNorWriteIntoAFifo) {
+  const std::string d = tempDir();
+  writeBytes(d + "/victim", "precious");
+  fs::create_symlink(d + "/victim", d + "/map.fmtsdf");
+  map_->save(d + "/map.fmtsdf", versionTwo());
+  EXPECT_EQ(readBytes(d + "/victim"), "precious");
+  EXPECT_FALSE(fs::is_symlink(d + "/map.fmtsdf"));
+  EXPECT_EQ(readBytes(d + "/map.fmtsdf"), *good_);
+  ASSERT_EQ(mkfifo((d + "/pipe.fmtsdf").c_str(), 0644), 0);
+  try {
+    map_->save(d + "/pipe.fmtsdf");
+    ADD_FAILURE() << "saved into a FIFO";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find(d + "/pipe.fmtsdf: is a FIFO"), std::string::npos) << e.what();
+  }
+  EXPECT_TRUE(fs::is_fifo(d + "/pipe.fmtsdf"));
+  EXPECT_EQ(listing(d), (std::set<std::string>{"map.fmtsdf", "pipe.fmtsdf", "victim"}));
   fs::remove_all(d);
 }
 

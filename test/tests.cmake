@@ -88,6 +88,7 @@ fm_add_test(test_conversions SOURCES test/test_conversions.cpp LIBS fisheye_mapp
 fm_add_test(test_mesh_distance SOURCES test/test_mesh_distance.cpp)
 fm_add_test(test_paths SOURCES test/test_paths.cpp)
 fm_add_test(test_safe_open SOURCES test/test_safe_open.cpp)
+fm_add_test(test_safe_write SOURCES test/test_safe_write.cpp)
 fm_add_test(test_mesh_export SOURCES test/test_mesh_export.cpp)
 fm_add_test(test_mesh_markers SOURCES test/test_mesh_markers.cpp LIBS fisheye_mapping_ros)
 fm_add_test(test_camera_info SOURCES test/test_camera_info.cpp LIBS fisheye_mapping_ros)

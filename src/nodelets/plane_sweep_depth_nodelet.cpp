@@ -22,8 +22,11 @@
 //                               update of the online self-calibration)
 // Services    ~save_calibration (FilePath: the self-calibrated camchain and its
 //             mount, the old files kept as .1; empty path: ~self_calibration_file;
-//             relative: against $ROS_HOME). The same save runs on shutdown
-//             when a correction was applied.
+//             relative: inside ~save_directory, $ROS_HOME/fisheye_mapping by
+//             default; outside it refused unless ~allow_any_save_path, unsafe;
+//             links replaced, never followed; FIFOs and devices refused;
+//             every write verified). The same save runs on shutdown when a
+//             correction was applied.
 // Parameters  ~rig_source (camchain | camera_info; default camchain),
 //             ~camchain, ~mount (camchain source), ~base_frame (camera_info
 //             source, default base_link): the rig from the frame sets'
@@ -96,8 +99,8 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
     std::lock_guard<std::mutex> lock(mutex_);
     if (stage_ && stage_->selfCalibration() && stage_->selfCalibration()->changed() && !calibration_file_.empty()) {
       try {
-        const std::string path = tsdf_node::outputPath(calibration_file_);
-        saveCalibrationTo(path);
+        const std::string path = confineSavePath(calibration_file_, save_folder_);
+        stage_->saveCalibration(path);
         NODELET_INFO("self-calibration saved on shutdown to %s", path.c_str());
       } catch (const std::exception& e) {
         NODELET_ERROR("self-calibration not saved on shutdown: %s", e.what());
@@ -126,6 +129,10 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
       base_frame_ = opts.base_frame;
       publish_uniqueness_ = opts.publish_uniqueness;
       calibration_file_ = opts.self_calibration_file;
+      save_folder_ = tsdf_node::saveFolder(opts.save);
+      if (save_folder_.allow_any_path) {
+        NODELET_WARN("~allow_any_save_path is set (UNSAFE): save_calibration may write any file this node can write");
+      }
       time_reset = opts.time_reset.time_reset_threshold;
       monitor_ = std::make_unique<StageMonitor>(nh, pnh, "depth");
       if (!opts.rig.fromCameraInfo()) {
@@ -207,22 +214,15 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
     calibration_ = msg;
   }
 
-  void saveCalibrationTo(const std::string& path) {
-    std::error_code ec;
-    const std::filesystem::path parent = std::filesystem::path(path).parent_path();
-    if (!parent.empty()) std::filesystem::create_directories(parent, ec);
-    if (ec) throw std::runtime_error("cannot create the folder " + parent.string() + ": " + ec.message());
-    stage_->saveCalibration(path);
-  }
-
   bool saveCalibration(FilePath::Request& req, FilePath::Response& res) {
     std::lock_guard<std::mutex> lock(mutex_);
     const std::string requested = req.path.empty() ? calibration_file_ : req.path;
     try {
       if (!stage_) throw std::runtime_error("the depth stage has no rig yet");
       if (requested.empty()) throw std::invalid_argument("no path given and ~self_calibration_file is empty");
-      const std::string path = tsdf_node::outputPath(requested);
-      saveCalibrationTo(path);
+      // Inside ~save_directory (confineSavePath creates missing folders).
+      const std::string path = confineSavePath(requested, save_folder_);
+      stage_->saveCalibration(path);
       res.success = true;
       res.message = "self-calibrated camchain saved to " + path + " (mount: " +
                     OnlineRigCalibrator::savedMountPath(path) + ")";
@@ -498,6 +498,7 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
   std::unique_ptr<ZDepthConverter> zdepth_;
   bool publish_uniqueness_ = false, reconfigured_ = false;
   std::string calibration_file_;
+  SaveFolder save_folder_;  // where save_calibration may write (~save_directory)
   ros::Publisher calibration_pub_;
   ros::ServiceServer save_service_;
   RigSelfCalibration calibration_;  // views_mutex_: the last state, for the diagnostics

@@ -24,9 +24,13 @@
 //             /diagnostics (StageMonitor "tsdf": rates, integration time, drops
 //                    by reason, tf failures; frames, errors caught, lost swap
 //                    blocks, saves, block counts)
-// Services    ~save_mesh, ~save_cloud, ~save_map, ~load_map (FilePath: an
-//             absolute path, or one relative to $ROS_HOME (~/.ros); empty is
-//             an error), ~clear_map (std_srvs/Trigger)
+// Services    ~save_mesh, ~save_cloud, ~save_map, ~load_map (FilePath: a
+//             path relative to ~save_directory ($ROS_HOME/fisheye_mapping by
+//             default), or an absolute one; empty is an error; a save outside
+//             the folder is refused unless ~allow_any_save_path (unsafe); a
+//             link at the target is replaced, never followed; a FIFO or a
+//             device refused; every save verified (fsync, size, close)),
+//             ~clear_map (std_srvs/Trigger)
 // Parameters  see docs/nodelets.md ("fisheye_mapping/TsdfFusion"); max_range,
 //             min_observations and publish_period also through
 //             dynamic_reconfigure (cfg/TsdfFusion.cfg).
@@ -107,11 +111,15 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
       // Every parameter is declared once: the map's in TsdfConfig, the node's
       // own (frames, persistence, time resets) in TsdfNodeOptions.
       requireKnownParams(pnh, {TsdfConfig::params().names(), TsdfNodeOptions::params().names(), {"output_directory"}});
-      if (pnh.hasParam("output_directory")) {
-        NODELET_WARN("~output_directory is no longer read: relative service paths resolve against $ROS_HOME (%s)",
-                     tsdf_node::rosHome().c_str());
-      }
       opts_ = TsdfNodeOptions::params().read(RosParams(pnh), TsdfNodeOptions());
+      save_folder_ = tsdf_node::saveFolder(opts_.save);
+      if (pnh.hasParam("output_directory")) {
+        NODELET_WARN("~output_directory is no longer read: relative service paths resolve inside ~save_directory (%s)",
+                     save_folder_.directory.c_str());
+      }
+      if (save_folder_.allow_any_path) {
+        NODELET_WARN("~allow_any_save_path is set (UNSAFE): save requests may write any file this node can write");
+      }
       world_frame_ = opts_.world_frame;
       base_frame_ = opts_.base_frame;
       reload_on_start_ = opts_.reload_map_on_start;
@@ -122,11 +130,13 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
       publish_period_ = opts_.publish_period;
       queue_size = opts_.queue_size;
       rig_source_ = opts_.rig.rig_source;
-      // Relative: against $ROS_HOME, like the services' paths.
+      // Inside the save folder, like the services' paths (else refused:
+      // the stage does not start).
       // The map file's policy (save on shutdown, .1 backup, reload, autosave)
       // is the core's MapSession.
       session_ = std::make_unique<MapSession>(
-          opts_.save_map_on_shutdown.empty() ? std::string() : tsdf_node::outputPath(opts_.save_map_on_shutdown),
+          opts_.save_map_on_shutdown.empty() ? std::string()
+                                             : confineSavePath(opts_.save_map_on_shutdown, save_folder_),
           [this](bool error, const std::string& message) { say(error, message); });
       cfg = TsdfConfig::fromParams(RosParams(pnh));
       if (!opts_.rig.fromCameraInfo()) rig_ = loadRigFromParams(pnh);
@@ -616,11 +626,14 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     pub.publish(mesh_markers_->republishAll(mesher_->blocks(), stamp));
   }
 
-  // A FilePath service: `requested` resolved (relative: against $ROS_HOME;
-  // empty: an error), fn run on the absolute path under mutex_; the response
-  // and the log say what was done where, or why not.
+  // A FilePath service: `requested` resolved (a save: confined to the save
+  // folder; a load: relative to it; empty: an error), fn run on the absolute
+  // path under mutex_; the response and the log say what was done where, or
+  // why not (the OS error of a failed write among it).
+  enum class Access { kSave, kLoad };
   template <typename Fn>
-  bool run(fisheye_mapping::FilePath::Response& res, const std::string& requested, const char* what, Fn fn) {
+  bool run(fisheye_mapping::FilePath::Response& res, const std::string& requested, const char* what, Fn fn,
+           Access access = Access::kSave) {
     std::lock_guard<std::mutex> lock(mutex_);
     if (!map_) {
       res.success = false;
@@ -628,7 +641,8 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
       return true;
     }
     try {
-      const std::string path = tsdf_node::outputPath(requested);
+      const std::string path = access == Access::kSave ? confineSavePath(requested, save_folder_)
+                                                       : tsdf_node::inputPath(requested, save_folder_);
       fn(path);
       res.success = true;
       res.message = std::string(what) + " " + path + ": done";
@@ -672,7 +686,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
       map_->load(p);
       session_->changed();
       clearMesh();
-    });
+    }, Access::kLoad);
   }
   bool clearMap(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
     std::lock_guard<std::mutex> lock(mutex_);
@@ -766,6 +780,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
   TsdfNodeOptions opts_;  // the node's options, publish_period as it runs; mutex_
   std::string world_frame_, base_frame_;
   std::unique_ptr<MapSession> session_;  // the file of save_map_on_shutdown; mutex_
+  SaveFolder save_folder_;               // where saves may write (~save_directory)
   bool reload_on_start_ = false, clear_on_time_reset_ = false;
   double autosave_period_ = 0.0, time_reset_threshold_ = 1.0, publish_period_ = 1.0;
   bool sigterm_acquired_ = false;

@@ -34,6 +34,23 @@ const ParamTable<TimeResetOptions>& TimeResetOptions::params() {
   return t;
 }
 
+const ParamTable<SaveOptions>& SaveOptions::params() {
+  using C = SaveOptions;
+  static const ParamTable<C> t = [] {
+    ParamTable<C> t("saves");
+    t.text("save_directory", [](C& c) -> std::string& { return c.save_directory; },
+           "Folder the save services and the automatic saves write into (created when missing; relative: against "
+           "$ROS_HOME, ~/.ros when unset). A relative save path is taken inside it; an absolute one outside it, "
+           "or one leading out of it through '..' or a link, is refused")
+        .flag("allow_any_save_path", [](C& c) -> bool& { return c.allow_any_save_path; },
+              "UNSAFE: let save requests write to absolute paths outside save_directory (any client on the ROS "
+              "network could then overwrite any file the node may write); links, FIFOs and devices at the target "
+              "are still refused or replaced, never followed");
+    return t;
+  }();
+  return t;
+}
+
 const ParamTable<DiagnosticOptions>& DiagnosticOptions::params() {
   using C = DiagnosticOptions;
   static const ParamTable<C> t = [] {
@@ -77,7 +94,9 @@ const ParamTable<DepthNodeOptions>& DepthNodeOptions::params() {
               "Also publish depth/uniqueness (best / second-best cost)")
         .text("self_calibration_file", [](C& c) -> std::string& { return c.self_calibration_file; },
               "Self-calibrated camchain written by save_calibration and on shutdown (its mount beside it as "
-              "<name>_mount.yaml; the old ones kept as .1; relative: against $ROS_HOME; empty: no save on shutdown)")
+              "<name>_mount.yaml; the old ones kept as .1; relative: inside save_directory; empty: no save on "
+              "shutdown)")
+        .include(SaveOptions::params(), [](C& c) -> SaveOptions& { return c.save; })
         .include(TimeResetOptions::params(), [](C& c) -> TimeResetOptions& { return c.time_reset; })
         .include(DiagnosticOptions::params(), [](C& c) -> DiagnosticOptions& { return c.diagnostics; });
     return t;
@@ -125,12 +144,13 @@ const ParamTable<TsdfNodeOptions>& TsdfNodeOptions::params() {
         .number("queue_size", [](C& c) -> int& { return c.queue_size; }, R::atLeast(1), "",
                 "Depth frames waiting for their pose")
         .text("save_map_on_shutdown", [](C& c) -> std::string& { return c.save_map_on_shutdown; },
-              "Map file written on shutdown (SIGINT, SIGTERM, unload) and by autosave; relative: against $ROS_HOME; "
-              "empty: no save")
+              "Map file written on shutdown (SIGINT, SIGTERM, unload) and by autosave; relative: inside "
+              "save_directory (an absolute path must lie inside it too); empty: no save")
         .flag("reload_map_on_start", [](C& c) -> bool& { return c.reload_map_on_start; },
               "Start from save_map_on_shutdown (or its .1) when it holds a valid map")
         .number("autosave_period", [](C& c) -> double& { return c.autosave_period; }, R::atLeast(0), "s",
                 "Time between saves to save_map_on_shutdown while the map changes; 0: off")
+        .include(SaveOptions::params(), [](C& c) -> SaveOptions& { return c.save; })
         .flag("clear_map_on_time_reset", [](C& c) -> bool& { return c.clear_map_on_time_reset; },
               "A time reset clears the map (else it is kept)")
         .flag("intensity", [](C& c) -> bool& { return c.intensity; },

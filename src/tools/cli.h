@@ -33,6 +33,7 @@
 #include <unistd.h>
 
 #include "fisheye_mapping/core/common/safe_open.h"
+#include "fisheye_mapping/core/common/safe_write.h"
 
 namespace fisheye_mapping {
 namespace cli {
@@ -228,38 +229,15 @@ inline void requireOutputFile(const std::string& option, const std::string& path
   }
 }
 
-// Temporary name beside `path` (same folder, so the rename is atomic).
-inline std::string partialName(const std::string& path) {
-  return path + ".partial." + std::to_string(static_cast<long>(getpid()));
-}
-
-// Writes `path` through `write(tmp)` into a temporary file, then renames it over
-// `path`: a failed or interrupted write leaves the old file as it was and no
-// temporary behind. Throws std::runtime_error naming the file.
-inline void writeAtomically(const std::string& path, const std::function<void(const std::string& tmp)>& write) {
-  const std::string tmp = partialName(path);
-  try {
-    write(tmp);
-    std::error_code ec;
-    if (!std::filesystem::is_regular_file(tmp, ec)) throw std::runtime_error(path + ": nothing was written");
-    if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-      throw std::runtime_error(path + ": cannot rename the new file into place: " + std::strerror(errno));
-    }
-  } catch (...) {
-    std::remove(tmp.c_str());
-    throw;
-  }
-}
-
-// writeAtomically for text: `fill` writes into the stream; checked for errors.
+// Writes the text `fill` puts into the stream to `path` through
+// writeFileSafely (core/common/safe_write.h): complete or not at all (a
+// failed write keeps the old file and leaves no temporary), a link at path
+// replaced, never followed, a FIFO or a device refused, fsync, size and close
+// checked. Throws std::runtime_error naming the file and the OS error.
 inline void writeTextAtomically(const std::string& path, const std::function<void(std::ostream&)>& fill) {
-  writeAtomically(path, [&](const std::string& tmp) {
-    std::ofstream f(tmp);
-    if (!f) throw std::runtime_error(path + ": cannot write: " + std::strerror(errno));
-    fill(f);
-    f.close();
-    if (!f) throw std::runtime_error(path + ": write failed (disk full?)");
-  });
+  std::ostringstream text;
+  fill(text);
+  writeFileSafely(path, text.str());
 }
 
 }  // namespace cli

@@ -237,7 +237,9 @@ int runSynthetic(const std::map<std::string, std::string>& a) {
   }
 
   std::vector<Row> rows;
-  std::ofstream csv(out + "/depth_frames.csv");
+  // Every output through the checked writer (cli::writeTextAtomically,
+  // writeImageFile); depth_frames.csv once complete.
+  std::ostringstream csv;
   csv << "frame,time_s,config,median_m,mean_m,median_beyond_15m_m,coverage,ms\n";
   auto record = [&](int f, double t, const std::string& name, const cv::Mat& depth, const cv::Mat& truth, double ms) {
     Row r{name, f, fm::depthError(depth, truth, cv::Mat(), 15.0, max_range), ms};
@@ -300,19 +302,19 @@ int runSynthetic(const std::map<std::string, std::string>& a) {
     }
     {
       const fm::DepthResult rv = vehicle.compute(ref_view, all, &T_base_ref);
-      if (f == 0) cv::imwrite(out + "/frame0_vehicle_filtered.png", fm::colorizeDepth(rv.depth, base.near, base.far));
+      if (f == 0) fm::writeImageFile(out + "/frame0_vehicle_filtered.png", fm::colorizeDepth(rv.depth, base.near, base.far));
       record(f, t, "5 cameras, vehicle.yaml filters", rv.depth, truth, rv.total_ms);
       vehicle_figs.push_back(realFigures(rv.depth, truth, has_ray, 20.0));
       ms_no_texture.push_back(untextured.compute(ref_view, all, &T_base_ref).total_ms);
     }
     if (f == 0) {
       const double near = base.near, far = base.far;
-      cv::imwrite(out + "/frame0_reference.png", images[ref]);
-      cv::imwrite(out + "/frame0_truth.png", fm::colorizeDepth(truth, near, far));
-      cv::imwrite(out + "/frame0_full.png", fm::colorizeDepth(rf.raw_depth, near, far));
-      cv::imwrite(out + "/frame0_half.png", fm::colorizeDepth(rh.raw_depth, near, far));
-      cv::imwrite(out + "/frame0_multiscale.png", fm::colorizeDepth(rm.raw_depth, near, far));
-      cv::imwrite(out + "/frame0_multiscale_filtered.png", fm::colorizeDepth(d_all, near, far));
+      fm::writeImageFile(out + "/frame0_reference.png", images[ref]);
+      fm::writeImageFile(out + "/frame0_truth.png", fm::colorizeDepth(truth, near, far));
+      fm::writeImageFile(out + "/frame0_full.png", fm::colorizeDepth(rf.raw_depth, near, far));
+      fm::writeImageFile(out + "/frame0_half.png", fm::colorizeDepth(rh.raw_depth, near, far));
+      fm::writeImageFile(out + "/frame0_multiscale.png", fm::colorizeDepth(rm.raw_depth, near, far));
+      fm::writeImageFile(out + "/frame0_multiscale_filtered.png", fm::colorizeDepth(d_all, near, far));
     }
   }
 
@@ -383,7 +385,7 @@ int runSynthetic(const std::map<std::string, std::string>& a) {
        << 100 * mean_of(*v, [](const RealFigures& x) { return x.coverage; }) << " % |\n";
   }
   {
-    std::ofstream rc(out + "/real_figures.csv");
+    std::ostringstream rc;
     rc << "filters,sky_share,rel_median_20m,coverage_20m,calibration_error_deg,ms_texture,ms_no_texture\n";
     for (const auto& [name, v] : {std::make_pair(std::string("paper"), &paper_figs),
                                   std::make_pair(std::string("vehicle"), &vehicle_figs)}) {
@@ -392,12 +394,14 @@ int runSynthetic(const std::map<std::string, std::string>& a) {
          << mean_of(*v, [](const RealFigures& x) { return x.coverage; }) << "," << calib_error_deg << ","
          << mean(ms_texture) << "," << mean(ms_no_texture) << "\n";
     }
+    fm::cli::writeTextAtomically(out + "/real_figures.csv", [&](std::ostream& f) { f << rc.str(); });
   }
   md << std::setprecision(0) << "\nFiltered multi-scale depth: " << mean(ms_texture) << " ms per frame with the texture "
      << "filter, " << mean(ms_no_texture) << " ms without.\n";
   md << "\n" << frames << " frames of the " << wc.preset << " preset (seed " << wc.seed << "), reference cam0, errors "
      << "over pixels with a true range up to " << max_range << " m; backend " << multi.backendName() << ".\n";
-  std::ofstream(out + "/depth_summary.md") << md.str();
+  fm::cli::writeTextAtomically(out + "/depth_frames.csv", [&](std::ostream& f) { f << csv.str(); });
+  fm::cli::writeTextAtomically(out + "/depth_summary.md", [&](std::ostream& f) { f << md.str(); });
   std::cout << md.str();
   return 0;
 }
@@ -526,7 +530,7 @@ cv::Mat roadOverlay(const cv::Mat& image, const cv::Mat& depth, const fm::Camera
 void reportVcharge(const std::string& out, const std::string& camera, const std::string& label, int k,
                    const std::vector<std::pair<std::string, VchargeCheck>>& checks) {
   const std::string path = out + "/vcharge_" + camera + "_check.csv";
-  std::ofstream csv(path);
+  std::ostringstream csv;
   csv << "camera,code,frames,depth,consistency_share,consistency_compared,consistency_median_rel_diff,"
       << "flatness_share,flatness_points,road_pixels,flatness_median_dist_m,ground_z_m,ground_tilt_deg\n";
   for (const auto& [which, c] : checks) {
@@ -535,6 +539,7 @@ void reportVcharge(const std::string& out, const std::string& camera, const std:
         << c.flatness.points << "," << c.road_pixels << "," << c.flatness.median_abs_dist << "," << c.ground_z << ","
         << c.ground_tilt_deg << "\n";
   }
+  fm::cli::writeTextAtomically(path, [&](std::ostream& f) { f << csv.str(); });
   const VchargeCheck& c = checks.front().second;
   std::cout << std::fixed << std::setprecision(1) << "vcharge " << camera << " check (" << label << ", frames " << k
             << "/" << k + 1 << ", " << checks.front().first << "): consistency " << 100 * c.consistency.share
@@ -580,7 +585,7 @@ int runVcharge(const std::map<std::string, std::string>& a) {
   fm::writeDepthTiff(out + "/vcharge_" + camera + "_depth_k1.tiff", r1.depth);
   const cv::Mat ours = fm::colorizeDepth(r.depth, config.near, config.far);
   const cv::Mat ours_raw = fm::colorizeDepth(r.raw_depth, config.near, config.far);
-  cv::imwrite(out + "/vcharge_" + camera + "_depth.png", ours);
+  fm::writeImageFile(out + "/vcharge_" + camera + "_depth.png", ours);
   // Side by side: reference | PlaneSweepLib | ours unfiltered | ours filtered.
   std::vector<cv::Mat> tiles;
   cv::Mat refc;
@@ -600,7 +605,7 @@ int runVcharge(const std::map<std::string, std::string>& a) {
   cv::Mat row;
   cv::hconcat(tiles, row);
   cv::resize(row, row, cv::Size(), 0.5, 0.5, cv::INTER_AREA);
-  cv::imwrite(out + "/vcharge_" + camera + "_compare.png", row);
+  fm::writeImageFile(out + "/vcharge_" + camera + "_compare.png", row);
   std::cout << "vcharge " << camera << ": reference " << names[ref] << ", " << r.used_views.size()
             << " supporting frames, " << std::fixed << std::setprecision(1) << r.total_ms << " ms, "
             << cv::countNonZero(r.depth == r.depth) << " valid pixels after filtering ("
@@ -616,7 +621,7 @@ int runVcharge(const std::map<std::string, std::string>& a) {
   cv::hconcat(roadOverlay(images[ref], r.depth, rig.cameras[0].model, filtered),
               roadOverlay(images[ref], r.raw_depth, rig.cameras[0].model, raw), road);
   cv::resize(road, road, cv::Size(), 0.5, 0.5, cv::INTER_AREA);
-  cv::imwrite(out + "/vcharge_" + camera + "_road.png", road);
+  fm::writeImageFile(out + "/vcharge_" + camera + "_road.png", road);
   return 0;
 }
 
@@ -639,7 +644,7 @@ int runVchargeCheck(const std::map<std::string, std::string>& a) {
   reportVcharge(out, camera, get(a, "label", "saved depth"), k, {{"saved", c}});
   cv::Mat road = roadOverlay(s.images[k], depth_k, s.rig.cameras[0].model, c);
   cv::resize(road, road, cv::Size(), 0.5, 0.5, cv::INTER_AREA);
-  cv::imwrite(out + "/vcharge_" + camera + "_road.png", road);
+  fm::writeImageFile(out + "/vcharge_" + camera + "_road.png", road);
   return 0;
 }
 

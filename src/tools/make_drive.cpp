@@ -26,6 +26,7 @@
 #include <iostream>
 #include <memory>
 #include <random>
+#include <sstream>
 #include <string>
 
 #include <geometry_msgs/TransformStamped.h>
@@ -37,6 +38,7 @@
 #include "fisheye_mapping/Detection2DArray.h"
 #include "fisheye_mapping/core/camera/rig.h"
 #include "fisheye_mapping/core/camera/rig_refinement.h"
+#include "fisheye_mapping/core/depth/depth_image.h"
 #include "fisheye_mapping/core/sim/synthetic_world.h"
 #include "fisheye_mapping/core/sim/vehicle_labels.h"
 #include "fisheye_mapping/ros/conversions.h"
@@ -265,25 +267,28 @@ class DatasetWriter {
  public:
   DatasetWriter(const Options& o, int argc, char** argv) : dir_(o.dataset), min_px_(o.dataset_min_px), seed_(o.seed) {
     for (const char* sub : {"/images", "/labels"}) std::filesystem::create_directories(dir_ + sub);
-    std::ofstream classes(dir_ + "/classes.txt");
-    for (int k = 0; k < fm::synth::kNumVehicleKinds; ++k) classes << fm::synth::kindName(fm::synth::VehicleKind(k)) << "\n";
-    std::ofstream readme(dir_ + "/README.txt");
+    // Every file through the checked writer (cli::writeTextAtomically);
+    // boxes.csv once complete (finish()).
+    fm::cli::writeTextAtomically(dir_ + "/classes.txt", [](std::ostream& classes) {
+      for (int k = 0; k < fm::synth::kNumVehicleKinds; ++k)
+        classes << fm::synth::kindName(fm::synth::VehicleKind(k)) << "\n";
+    });
+    std::ostringstream readme;
     readme << "make_drive training set: preset " << o.preset << ", seed " << o.seed << ", every " << o.dataset_every
            << " frame sets, boxes of at least " << min_px_ << " px a side\n"
            << "labels: YOLO 'class cx cy w h' normalised by the image size; classes.txt: 0 car, 1 van, 2 truck, 3 bus\n"
            << "COCO names for a COCO model: car -> car, van -> car, truck -> truck, bus -> bus\ncommand:";
     for (int i = 0; i < argc; ++i) readme << " " << argv[i];
     readme << "\n";
-    csv_.open(dir_ + "/boxes.csv");
+    fm::cli::writeTextAtomically(dir_ + "/README.txt", [&](std::ostream& f) { f << readme.str(); });
     csv_ << "image,vehicle,class,moving,x_min,y_min,x_max,y_max,pixels\n";
-    if (!classes || !readme || !csv_) throw std::runtime_error("cannot write the dataset in " + dir_);
   }
   void add(const fm::synth::World& world, int set, size_t cam, const cv::Mat& image,
            const std::vector<fm::synth::VisibleBox>& boxes) {
     char name[64];
     std::snprintf(name, sizeof(name), "s%u_f%05d_cam%zu", seed_, set, cam);
-    if (!cv::imwrite(dir_ + "/images/" + name + ".png", image)) throw std::runtime_error("cannot write " + dir_ + "/images/" + name + ".png");
-    std::ofstream labels(dir_ + "/labels/" + name + ".txt");
+    fm::writeImageFile(dir_ + "/images/" + name + ".png", image);
+    std::ostringstream labels;
     for (const auto& b : boxes) {
       if (b.box.width < min_px_ || b.box.height < min_px_) continue;
       const int kind = static_cast<int>(world.vehicleModel(b.id).dims().kind);
@@ -293,8 +298,11 @@ class DatasetWriter {
            << b.box.y + b.box.height << "," << b.pixels << "\n";
       ++labels_;
     }
-    if (!labels || !csv_) throw std::runtime_error("cannot write the labels of " + std::string(name) + " in " + dir_);
+    fm::cli::writeTextAtomically(dir_ + "/labels/" + name + ".txt", [&](std::ostream& f) { f << labels.str(); });
     ++images_;
+  }
+  void finish() {
+    fm::cli::writeTextAtomically(dir_ + "/boxes.csv", [&](std::ostream& f) { f << csv_.str(); });
   }
   std::string summary() const {
     return std::to_string(images_) + " images, " + std::to_string(labels_) + " labelled vehicles -> " + dir_;
@@ -304,7 +312,7 @@ class DatasetWriter {
   std::string dir_;
   int min_px_;
   uint32_t seed_;
-  std::ofstream csv_;
+  std::ostringstream csv_;
   size_t images_ = 0, labels_ = 0;
 };
 
@@ -340,7 +348,7 @@ int main(int argc, char** argv) {
       // (rendered with) stays beside it for scoring.
       fm::writeKalibrRig(given, opt.out + "/camchain.yaml", opt.out + "/mount.yaml");
       fm::writeKalibrRig(rig, opt.out + "/camchain_true.yaml", opt.out + "/mount.yaml");
-      std::ofstream err(opt.out + "/calibration_error.yaml");
+      std::ostringstream err;
       err << "# make_drive: camchain.yaml = camchain_true.yaml with these errors (seed " << opt.seed
           << "): T_cam0_cam' = T_cam0_cam * (exp(rotation), translation), camera frame\n";
       for (int c = 0; c < n_cams; ++c) {
@@ -349,7 +357,7 @@ int main(int argc, char** argv) {
             << e.rotation_deg.z() << "], translation_mm: [" << e.translation_mm.x() << ", " << e.translation_mm.y()
             << ", " << e.translation_mm.z() << "]}\n";
       }
-      if (!err) throw std::runtime_error("cannot write " + opt.out + "/calibration_error.yaml");
+      fm::cli::writeTextAtomically(opt.out + "/calibration_error.yaml", [&](std::ostream& f) { f << err.str(); });
     } else {
       fm::writeKalibrRig(rig, opt.out + "/camchain.yaml", opt.out + "/mount.yaml");
     }
@@ -367,21 +375,21 @@ int main(int argc, char** argv) {
       knocked = fm::withRelativePose(rig, 0, opt.knock_camera, T);
       fm::writeKalibrRig(knocked, opt.out + "/camchain_knocked.yaml", opt.out + "/mount_knocked.yaml");
       std::filesystem::remove(opt.out + "/mount_knocked.yaml");  // the mount (cam0) does not change
-      std::ofstream k(opt.out + "/knock.yaml");
+      std::ostringstream k;
       k << "# make_drive --knock: from at_s seconds of drive on, the camera's true rotation is turned by deg degrees\n"
         << "# about the axis (1, 1, 0)/sqrt 2 of its frame (camchain_knocked.yaml); the calibration given stays.\n"
         << "camera: cam" << opt.knock_camera << "\ndeg: " << opt.knock_deg << "\nat_s: " << opt.knock_at << "\n";
-      if (!k) throw std::runtime_error("cannot write " + opt.out + "/knock.yaml");
+      fm::cli::writeTextAtomically(opt.out + "/knock.yaml", [&](std::ostream& f) { f << k.str(); });
     }
     world.saveStaticMeshPly(opt.out + "/static_scene.ply");
     {
-      std::ofstream w(opt.out + "/world.yaml");
+      std::ostringstream w;
       w << "# make_drive: the synthetic world of this drive (fisheye_mapping::synth::WorldConfig)\n"
         << "preset: " << wc.preset << "\nseed: " << wc.seed << "\nspeed: " << wc.speed
         << "\nmoving_vehicles: " << wc.moving_vehicles << "\nroute_length: " << wc.route_length
         << "\nasphalt_grain: " << wc.asphalt_grain << "\nclouds: " << wc.clouds << "\novercast: " << (wc.overcast ? "true" : "false") << "\nduration: " << opt.duration
         << "\n";
-      if (!w) throw std::runtime_error("cannot write " + opt.out + "/world.yaml");
+      fm::cli::writeTextAtomically(opt.out + "/world.yaml", [&](std::ostream& f) { f << w.str(); });
     }
 
     const std::string bag_path = opt.out + "/drive.bag";
@@ -479,7 +487,10 @@ int main(int argc, char** argv) {
     std::printf("make_drive: %s preset, seed %u: %d frame sets x %zu cameras (%zu images written, %zu dropped) "
                 "rendered and written in %.1f s -> %s\n",
                 opt.preset.c_str(), opt.seed, n_sets, rig.cameras.size(), images, dropped, elapsed, bag_path.c_str());
-    if (dataset) std::printf("make_drive: dataset: %s\n", dataset->summary().c_str());
+    if (dataset) {
+      dataset->finish();
+      std::printf("make_drive: dataset: %s\n", dataset->summary().c_str());
+    }
   } catch (const fm::CalibrationError& e) {
     std::cerr << "make_drive: " << e.what() << "\n";
     return 2;

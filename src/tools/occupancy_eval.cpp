@@ -24,6 +24,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "cli.h"
+#include "fisheye_mapping/core/depth/depth_image.h"
 #include "fisheye_mapping/core/sim/synthetic_world.h"
 #include "fisheye_mapping/core/tsdf/occupancy_grid.h"
 #include "fisheye_mapping/core/tsdf/tsdf_map.h"
@@ -154,7 +155,7 @@ int main(int argc, char** argv) {
       int cx, cy;
       if (grid.cellOf(p.x(), p.y(), &cx, &cy)) img.at<cv::Vec3b>(grid.height - 1 - cy, cx) = cv::Vec3b(0, 0, 255);
     }
-    if (!cv::imwrite(png, img)) throw std::runtime_error("cannot write " + png);
+    fm::writeImageFile(png, img);
     std::printf("wrote %s\n", png.c_str());
 
     if (world) {

@@ -276,8 +276,6 @@ int main(int argc, char** argv) {
     if (!save_depth.empty()) cli::prepareOutputDir("--save-depth", save_depth);
   });
   if (rc >= 0) return rc;
-  // Temporary outputs of this run; removed when it fails.
-  std::vector<std::string> partials;
   try {
     const fm::Rig rig = fm::loadKalibrRig(camchain, mount);
     const YAML::Node config = config_path.empty() ? YAML::Node() : loadYaml(config_path);
@@ -360,11 +358,8 @@ int main(int argc, char** argv) {
                                     gt_depth ? fm::SyncPolicy::Exact : sync_cfg.policy, sync_cfg.max_interval,
                                     std::size_t(sync_cfg.queue_size), sync_cfg.time_reset_threshold);
     const int ref_slot = depth_src == "gt" ? 0 : ref;
-    // timings.csv is written under a temporary name and renamed at the end.
-    const std::string csv_tmp = cli::partialName(out + "/timings.csv");
-    partials.push_back(csv_tmp);
-    std::ofstream csv(csv_tmp);
-    if (!csv) throw std::runtime_error("cannot write " + csv_tmp);
+    // timings.csv is written (checked) at the end.
+    std::ostringstream csv;
     csv << "stamp,sweep_ms,detect_ms,mask_ms,fuse_ms,total_ms,valid_pixels,masked_pixels\n";
     // Each detected vehicle's motion decision, with the truth where the bag
     // has the moving vehicles' true boxes (IoU >= 0.3 with one: moving).
@@ -552,8 +547,9 @@ int main(int argc, char** argv) {
     mapper.finish();                   // the frame sets since the last mesh update
     mesher_all.rebuild(mapper.map());  // every block of both stores, after the last frame
     const fm::TsdfMesher& mesher = mapper.mesher();
-    // Each file is written under a temporary name and renamed over the old one
-    // only once complete: a failed save keeps what an earlier run wrote.
+    // Each file is written beside its target, checked (fsync, size, close)
+    // and renamed over the old one only once complete (core/common/
+    // safe_write.h): a failed save keeps what an earlier run wrote.
     std::vector<std::string> written, not_written;
     for (const auto& [what, save] : std::vector<std::pair<std::string, std::function<void(const std::string&)>>>{
              {"mesh.ply", [&](const std::string& p) {
@@ -565,7 +561,7 @@ int main(int argc, char** argv) {
              {"cloud.pcd", [&](const std::string& p) { mesher.saveCloudPcd(p); }},
              {"cloud_all.pcd", [&](const std::string& p) { mesher_all.saveCloudPcd(p); }}}) {
       try {
-        cli::writeAtomically(out + "/" + what, save);
+        save(out + "/" + what);
         written.push_back(what);
       } catch (const std::exception& e) {  // e.g. nothing observed often enough: say so, keep the rest
         not_written.push_back(what);
@@ -627,10 +623,7 @@ int main(int argc, char** argv) {
         }
       }
     }
-    csv.close();
-    if (!csv) throw std::runtime_error("cannot write " + csv_tmp + " (disk full?)");
-    if (std::rename(csv_tmp.c_str(), (out + "/timings.csv").c_str()) != 0)
-      throw std::runtime_error("cannot rename " + csv_tmp + " to timings.csv");
+    cli::writeTextAtomically(out + "/timings.csv", [&](std::ostream& f) { f << csv.str(); });
     written.push_back("timings.csv");
     cli::writeTextAtomically(out + "/timings.md", [&](std::ostream& f) { f << md.str(); });
     written.push_back("timings.md");
@@ -649,11 +642,9 @@ int main(int argc, char** argv) {
       return 1;
     }
   } catch (const cli::UsageError& e) {  // an option that does not fit the rig (--topic)
-    for (const auto& p : partials) std::remove(p.c_str());
     std::cerr << "offline_mapper: " << e.what() << "\n";
     return 2;
   } catch (const std::exception& e) {
-    for (const auto& p : partials) std::remove(p.c_str());
     std::cerr << "\noffline_mapper: " << e.what() << "\n";
     return 1;
   }

@@ -89,9 +89,7 @@ fm::PlaneSweepConfig readConfig(const std::string& path, const std::vector<std::
 void writeOutputs(const std::string& prefix, const fm::DepthResult& r, const fm::PlaneSweepConfig& c) {
   fm::writeDepthTiff(prefix + "_depth.tiff", r.depth);
   fm::writeDepthTiff(prefix + "_cost.tiff", r.cost);
-  if (!cv::imwrite(prefix + "_depth.png", fm::colorizeDepth(r.depth, c.near, c.far))) {
-    throw std::runtime_error(prefix + "_depth.png: cannot write");
-  }
+  fm::writeImageFile(prefix + "_depth.png", fm::colorizeDepth(r.depth, c.near, c.far));
 }
 
 }  // namespace

@@ -71,11 +71,6 @@ int positiveInt(const std::string& flag, const std::string& s) {
   return int(v);
 }
 
-// Writes via a temporary name renamed over the target once complete.
-void commit(const std::string& tmp, const std::string& path) {
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) throw std::runtime_error("cannot rename " + tmp + " to " + path);
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -188,17 +183,11 @@ int main(int argc, char** argv) {
                 << "; nothing written\n";
       return 2;
     }
-    const std::string tmp_chain = out + ".partial", tmp_mount = (mount_out.empty() ? out : mount_out) + ".mount.partial";
-    try {
-      fm::writeKalibrRig(r.rig, tmp_chain, tmp_mount);
-      commit(tmp_chain, out);
-      if (mount_out.empty()) std::remove(tmp_mount.c_str());
-      else commit(tmp_mount, mount_out);
-    } catch (...) {
-      std::remove(tmp_chain.c_str());
-      std::remove(tmp_mount.c_str());
-      throw;
-    }
+    // Each file written beside its target, checked and renamed into place
+    // (writeFileSafely); the mount only when asked for.
+    const fm::KalibrRigText text = fm::kalibrRigText(r.rig);
+    fm::writeFileSafely(out, text.camchain);
+    if (!mount_out.empty()) fm::writeFileSafely(mount_out, text.mount);
     std::printf("corrected %d of %d cameras; wrote %s%s%s\n", r.applied(), n_cams - 1, out.c_str(),
                 mount_out.empty() ? "" : " and ", mount_out.c_str());
   } catch (const std::exception& e) {

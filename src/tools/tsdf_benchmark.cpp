@@ -22,6 +22,7 @@
 #include <fstream>
 #include <iostream>
 #include <numeric>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -153,7 +154,8 @@ int main(int argc, char** argv) {
   // Pinhole frames: range images for us, z-depth files for Open3D.
   std::vector<cv::Mat> frames, fisheye_frames;
   std::vector<Eigen::Isometry3d> poses;
-  std::ofstream pose_file(out + "/poses.txt");
+  // Every file through the checked writer (writeFileSafely).
+  std::ostringstream pose_file;
   for (int i = 0; i < n_frames; ++i) {
     const Eigen::Isometry3d T = cameraAt(i * step);
     cv::Mat range = scene.render(pinhole, T);
@@ -168,16 +170,17 @@ int main(int argc, char** argv) {
     }
     char name[64];
     std::snprintf(name, sizeof(name), "/frame_%03d.bin", i);
-    std::ofstream(out + name, std::ios::binary).write(reinterpret_cast<const char*>(z.ptr<float>()), z.total() * 4);
+    fm::writeFileSafely(out + name, std::string_view(reinterpret_cast<const char*>(z.ptr<float>()), z.total() * 4));
     const Eigen::Matrix4d M = T.matrix();
     for (int k = 0; k < 16; ++k) pose_file << M(k / 4, k % 4) << (k == 15 ? "\n" : " ");
     frames.push_back(range);
     poses.push_back(T);
     fisheye_frames.push_back(scene.render(fisheye, T));
   }
-  pose_file.close();
-  std::ofstream(out + "/intrinsics.txt") << in.width << " " << in.height << " " << in.fx << " " << in.fy << " "
-                                         << in.cx << " " << in.cy << "\n";
+  fm::writeFileSafely(out + "/poses.txt", pose_file.str());
+  std::ostringstream intrinsics;
+  intrinsics << in.width << " " << in.height << " " << in.fx << " " << in.fy << " " << in.cx << " " << in.cy << "\n";
+  fm::writeFileSafely(out + "/intrinsics.txt", intrinsics.str());
 
   fm::TsdfConfig cfg;  // 5 cm voxels, 0.2 m truncation
   cfg.threads = threads;

@@ -33,6 +33,15 @@ struct TimeResetOptions {
   static const ParamTable<TimeResetOptions>& params();
 };
 
+// Where a stage's save services and automatic saves may write (the TSDF's
+// maps, meshes and clouds, the depth stage's self-calibration): inside
+// save_directory only (core/common/safe_write.h, confineSavePath).
+struct SaveOptions {
+  std::string save_directory = "fisheye_mapping";  // relative: against $ROS_HOME
+  bool allow_any_save_path = false;                // UNSAFE: clients may write any file the node can
+  static const ParamTable<SaveOptions>& params();
+};
+
 // Diagnostics (StageMonitor) of every stage.
 struct DiagnosticOptions {
   double diagnostic_window = 10.0;          // s of the rate window
@@ -57,9 +66,10 @@ struct DepthNodeOptions {
   std::string base_frame = "base_link";
   bool publish_uniqueness = false;
   // Where save_calibration (empty request) and the save on shutdown write the
-  // self-calibrated camchain (relative: against $ROS_HOME); empty: no save on
-  // shutdown.
-  std::string self_calibration_file = "fisheye_mapping/self_calibrated_camchain.yaml";
+  // self-calibrated camchain (relative: inside save.save_directory); empty: no
+  // save on shutdown.
+  std::string self_calibration_file = "self_calibrated_camchain.yaml";
+  SaveOptions save;
   TimeResetOptions time_reset;
   DiagnosticOptions diagnostics;
   static const ParamTable<DepthNodeOptions>& params();
@@ -88,9 +98,10 @@ struct TsdfNodeOptions {
   std::string base_frame = "base_link";
   double publish_period = 1.0;  // s between mesh / cloud updates (run time)
   int queue_size = 10;
-  std::string save_map_on_shutdown;  // empty: no save
+  std::string save_map_on_shutdown;  // empty: no save; relative: inside save.save_directory
   bool reload_map_on_start = false;
   double autosave_period = 0.0;  // s; 0: off
+  SaveOptions save;
   bool clear_map_on_time_reset = false;
   bool intensity = true;  // subscribe `image` (the reference camera) for the map's intensity
   OccupancyGridConfig occupancy;

@@ -1,6 +1,6 @@
 // Node-level policy of the TsdfFusion nodelet kept out of its class
-// (header-only, used by src/nodelets/tsdf_fusion_nodelet.cpp): where the save
-// services write and SIGTERM handling.
+// (header-only, used by the TsdfFusion and PlaneSweepDepth nodelets): where
+// the save services write (the save folder) and SIGTERM handling.
 #ifndef FISHEYE_MAPPING_ROS_TSDF_NODE_HELPERS_H_
 #define FISHEYE_MAPPING_ROS_TSDF_NODE_HELPERS_H_
 
@@ -9,6 +9,7 @@
 #include <cerrno>
 #include <cstdlib>
 #include <cstring>
+#include <filesystem>
 #include <limits>
 #include <mutex>
 #include <stdexcept>
@@ -18,6 +19,8 @@
 #include <ros/init.h>
 
 #include "fisheye_mapping/core/common/paths.h"
+#include "fisheye_mapping/core/common/safe_write.h"
+#include "fisheye_mapping/ros/node_options.h"
 
 namespace fisheye_mapping {
 namespace tsdf_node {
@@ -34,10 +37,22 @@ inline std::string rosHome() {
   return std::string(home) + "/.ros";
 }
 
-// A path from a service request or parameter, absolute (resolveOutputPath
-// against rosHome()): throws std::invalid_argument naming the problem for an
-// empty path or a directory.
-inline std::string outputPath(const std::string& path) { return resolveOutputPath(path, rosHome()); }
+// The save folder of ~save_directory / ~allow_any_save_path: relative
+// against rosHome(). Throws std::invalid_argument when it is empty.
+inline SaveFolder saveFolder(const SaveOptions& options) {
+  if (options.save_directory.empty()) {
+    throw std::invalid_argument("~save_directory is empty: give the folder saves may write into");
+  }
+  const std::filesystem::path dir(options.save_directory);
+  return SaveFolder{(dir.is_absolute() ? dir : std::filesystem::path(rosHome()) / dir).lexically_normal().string(),
+                    options.allow_any_save_path};
+}
+
+// A file to read (load_map) named in a request: absolute, or relative to the
+// save folder (where a save with the same name wrote it).
+inline std::string inputPath(const std::string& path, const SaveFolder& folder) {
+  return resolveOutputPath(path, folder.directory);
+}
 
 // SIGTERM. roscpp installs a handler for SIGINT only; a SIGTERM (kill,
 // systemd, docker stop, roslaunch's escalation) ended a nodelet manager at

@@ -14,6 +14,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "fisheye_mapping/core/common/param_table.h"
+#include "fisheye_mapping/core/common/safe_write.h"
 
 namespace fisheye_mapping {
 namespace {
@@ -74,18 +75,6 @@ std::string fixed(double v, int digits) {
   os.precision(digits);
   os << v;
   return os.str();
-}
-
-// Moves the finished temporary file `tmp` over `path`; an existing `path` is
-// first copied to `path`.1.
-void replaceKeepingOld(const std::string& tmp, const std::string& path) {
-  namespace fs = std::filesystem;
-  std::error_code ec;
-  if (fs::exists(path, ec)) {
-    fs::copy_file(path, path + ".1", fs::copy_options::overwrite_existing, ec);
-    if (ec) throw std::runtime_error("cannot keep the old " + path + " as " + path + ".1: " + ec.message());
-  }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) throw std::runtime_error("cannot rename " + tmp + " to " + path);
 }
 
 }  // namespace
@@ -399,15 +388,16 @@ std::string OnlineRigCalibrator::savedMountPath(const std::string& camchain_path
 
 void OnlineRigCalibrator::saveCalibration(const std::string& camchain_path) const {
   const std::string mount = savedMountPath(camchain_path);
-  // Both files are written to temporaries first, then renamed into place.
-  const std::string tmp_chain = camchain_path + ".partial", tmp_mount = mount + ".partial";
+  // Both files are written (checked) beside their targets first, then
+  // renamed into place, the old ones kept as .1 (SafeFileWriter).
   try {
-    writeKalibrRig(rig_, tmp_chain, tmp_mount);
-    replaceKeepingOld(tmp_mount, mount);
-    replaceKeepingOld(tmp_chain, camchain_path);
+    const KalibrRigText text = kalibrRigText(rig_);
+    SafeFileWriter chain(camchain_path), mount_file(mount);
+    chain.write(text.camchain);
+    mount_file.write(text.mount);
+    mount_file.commit(true);
+    chain.commit(true);
   } catch (const std::exception& e) {
-    std::remove(tmp_chain.c_str());
-    std::remove(tmp_mount.c_str());
     throw std::runtime_error("cannot save the calibration to " + camchain_path + ": " + e.what());
   }
 }

@@ -11,6 +11,7 @@
 
 #include "fisheye_mapping/core/camera/rig.h"
 #include "fisheye_mapping/core/common/safe_open.h"
+#include "fisheye_mapping/core/common/safe_write.h"
 
 namespace fisheye_mapping {
 namespace {
@@ -195,12 +196,6 @@ void writeMatrix(YAML::Emitter& out, const Eigen::Isometry3d& T) {
     out << YAML::EndSeq;
   }
   out << YAML::EndSeq;
-}
-
-void writeFile(const std::string& path, const std::string& text) {
-  std::ofstream f(path);
-  f << text << "\n";
-  if (!f) fail(path, "", "cannot write file");
 }
 
 }  // namespace
@@ -438,8 +433,7 @@ Rig loadPslCalibrationFromString(const std::string& text, const std::string& cal
   return rig;
 }
 
-void writeKalibrRig(const Rig& rig, const std::string& camchain_path,
-                    const std::string& mount_path) {
+KalibrRigText kalibrRigText(const Rig& rig) {
   if (rig.cameras.empty()) throw CalibrationError("writeKalibrRig: the rig has no camera");
   YAML::Emitter chain;
   chain.SetDoublePrecision(17);
@@ -499,8 +493,13 @@ void writeKalibrRig(const Rig& rig, const std::string& camchain_path,
   for (const auto& cam : rig.cameras) mount << YAML::Key << cam.name << YAML::Value << cam.frame_id;
   mount << YAML::EndMap << YAML::EndMap;
 
-  writeFile(camchain_path, chain.c_str());
-  writeFile(mount_path, mount.c_str());
+  return {std::string(chain.c_str()) + "\n", std::string(mount.c_str()) + "\n"};
+}
+
+void writeKalibrRig(const Rig& rig, const std::string& camchain_path, const std::string& mount_path) {
+  const KalibrRigText text = kalibrRigText(rig);
+  writeFileSafely(camchain_path, text.camchain);
+  writeFileSafely(mount_path, text.mount);
 }
 
 void checkImageSize(const RigCamera& camera, int width, int height) {

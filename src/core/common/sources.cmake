@@ -4,5 +4,6 @@ set(FM_COMMON_SOURCES
   param_table.cpp
   paths.cpp
   safe_open.cpp
+  safe_write.cpp
   stage_stats.cpp
 )

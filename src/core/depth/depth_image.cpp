@@ -3,9 +3,13 @@
 #include <cmath>
 #include <stdexcept>
 #include <string>
+#include <string_view>
+#include <vector>
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+
+#include "fisheye_mapping/core/common/safe_write.h"
 
 namespace fisheye_mapping {
 
@@ -28,15 +32,34 @@ cv::Mat colorizeDepth(const cv::Mat& depth, double near, double far) {
   return colour;
 }
 
+namespace {
+
+// `image` encoded as `ext` (cv::imencode), saved through writeFileSafely.
+void encodeAndSave(const std::string& path, const std::string& ext, const cv::Mat& image, const char* what) {
+  bool ok = false;
+  std::vector<uchar> bytes;
+  try {
+    ok = cv::imencode(ext, image, bytes);
+  } catch (const cv::Exception& e) {
+    throw std::runtime_error(path + ": cannot write " + what + ": " + e.what());
+  }
+  if (!ok) throw std::runtime_error(path + ": cannot write " + what);
+  writeFileSafely(path, std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
+}
+
+}  // namespace
+
 void writeDepthTiff(const std::string& path, const cv::Mat& depth) {
   CV_Assert(depth.type() == CV_32FC1);
-  bool ok = false;
-  try {
-    ok = cv::imwrite(path, depth);
-  } catch (const cv::Exception& e) {
-    throw std::runtime_error(path + ": cannot write depth TIFF: " + e.what());
+  encodeAndSave(path, ".tiff", depth, "depth TIFF");
+}
+
+void writeImageFile(const std::string& path, const cv::Mat& image) {
+  const std::string::size_type dot = path.find_last_of('.');
+  if (dot == std::string::npos || path.find('/', dot) != std::string::npos) {
+    throw std::runtime_error(path + ": cannot write an image: no extension (.png, .jpg, .tiff) to choose the format");
   }
-  if (!ok) throw std::runtime_error(path + ": cannot write depth TIFF");
+  encodeAndSave(path, path.substr(dot), image, "image");
 }
 
 ZDepthConverter::ZDepthConverter(const CameraModel& camera)

@@ -12,6 +12,8 @@
 #include <set>
 #include <stdexcept>
 
+#include "fisheye_mapping/core/common/safe_write.h"
+
 namespace fisheye_mapping {
 namespace synth {
 namespace {
@@ -759,7 +761,12 @@ void World::saveStaticMeshPly(const std::string& path) const {
       for (int j = 0; j < nv; ++j) quad(P(i, j), P(i + 1, j), P(i + 1, j + 1), P(i, j + 1));
   }
   pcl::toPCLPointCloud2(vertices, mesh.cloud);
-  if (pcl::io::savePLYFileBinary(path, mesh) != 0) throw std::runtime_error(path + ": cannot write PLY mesh");
+  // PCL writes into memory, the file goes through the checked writer.
+  writeFileSafely(path, captureFileOutput([&](const std::string& name) {
+                    if (pcl::io::savePLYFileBinary(name, mesh) != 0) {
+                      throw std::runtime_error(path + ": cannot write PLY mesh");
+                    }
+                  }));
 }
 
 }  // namespace synth

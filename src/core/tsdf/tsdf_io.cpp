@@ -50,6 +50,7 @@
 
 #include "fisheye_mapping/core/common/safe_open.h"
 #include "fisheye_mapping/core/tsdf/tsdf_config.h"
+#include "fisheye_mapping/core/common/safe_write.h"
 
 namespace fisheye_mapping {
 namespace {
@@ -139,30 +140,6 @@ MapFileInfo parseHeader(const std::string& path, const char* bytes, size_t avail
                    formatHeaderNumber(kMaxTruncationVoxels) + "] voxels)");
   return info;
 }
-
-// Writes all of [data, data + n) to fd; throws on error.
-void writeAll(int fd, const char* data, size_t n, const std::string& path) {
-  while (n > 0) {
-    const ssize_t w = ::write(fd, data, n);
-    if (w < 0) {
-      if (errno == EINTR) continue;
-      fail(path, std::string("write failed: ") + std::strerror(errno));
-    }
-    data += w;
-    n -= static_cast<size_t>(w);
-  }
-}
-
-// The temporary file of a save: closed and removed unless committed.
-struct TmpFile {
-  std::string path;
-  int fd = -1;
-  bool keep = false;
-  ~TmpFile() {
-    if (fd >= 0) ::close(fd);
-    if (!keep && !path.empty()) ::unlink(path.c_str());
-  }
-};
 
 // Why replacing `path` by an empty map would destroy something; empty if it
 // would not (no file, or a map without blocks).
@@ -456,9 +433,10 @@ void saveMapFile(BlockStore& store, const std::string& path, const MapSaveOption
   namespace fs = std::filesystem;
   if (path.empty()) throw std::runtime_error("cannot save the map: empty path");
   std::error_code ec;
-  const fs::file_status st = fs::status(path, ec);
+  // A link at the path is replaced, never followed (SafeFileWriter); a FIFO
+  // or a device is refused there.
+  const fs::file_status st = fs::symlink_status(path, ec);
   if (fs::is_directory(st)) fail(path, "is a directory; give the map a file path (e.g. " + path + "/map.fmtsdf)");
-  if (fs::exists(st) && !fs::is_regular_file(st)) fail(path, "exists and is not a regular file");
   if (options.format_version < 2 || options.format_version > 4) {
     fail(path, "cannot write map format version " + std::to_string(options.format_version) + " (only 2, 3 or 4)");
   }
@@ -467,15 +445,12 @@ void saveMapFile(BlockStore& store, const std::string& path, const MapSaveOption
     if (!why.empty()) fail(path, "refusing to replace it by an empty map: " + why);
   }
 
-  TmpFile tmp;
-  const std::string tmp_path = path + ".tmp";
-  if (fs::is_directory(tmp_path, ec)) fail(path, tmp_path + " is a directory; cannot write the map beside it");
-  tmp.fd = ::open(tmp_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (tmp.fd < 0) fail(path, "cannot write " + tmp_path + ": " + std::strerror(errno));
-  tmp.path = tmp_path;
+  // Beside the target, never through a link at it; every write, the fsync,
+  // the size and the close checked (SafeFileWriter).
+  SafeFileWriter tmp(path);
 
   char header[kHeaderV2] = {};
-  writeAll(tmp.fd, header, sizeof(header), path);  // filled in at the end
+  tmp.write(header, sizeof(header));  // filled in at the end
   std::vector<char> buf;
   buf.reserve(256 * kRecordV2);
   uint64_t n = 0;
@@ -493,11 +468,11 @@ void saveMapFile(BlockStore& store, const std::string& path, const MapSaveOption
     }
     ++n;
     if (buf.size() >= 255 * kRecordV2) {
-      writeAll(tmp.fd, buf.data(), buf.size(), path);
+      tmp.write(buf.data(), buf.size());
       buf.clear();
     }
   }
-  writeAll(tmp.fd, buf.data(), buf.size(), path);
+  tmp.write(buf.data(), buf.size());
   if (n == 0 && options.refuse_empty_overwrite) {
     const std::string why = holdsData(path);
     if (!why.empty()) fail(path, "refusing to replace it by an empty map: " + why);
@@ -513,36 +488,10 @@ void saveMapFile(BlockStore& store, const std::string& path, const MapSaveOption
   std::memcpy(header + 36, &mw, 4);
   const uint32_t hcrc = crc32(header, 40);
   std::memcpy(header + 40, &hcrc, 4);
-  if (::pwrite(tmp.fd, header, sizeof(header), 0) != static_cast<ssize_t>(sizeof(header))) {
-    fail(path, std::string("write failed: ") + std::strerror(errno));
-  }
-  if (::fsync(tmp.fd) != 0) fail(path, std::string("write failed (fsync): ") + std::strerror(errno));
-  const int fd = tmp.fd;
-  tmp.fd = -1;
-  if (::close(fd) != 0) fail(path, std::string("write failed (close): ") + std::strerror(errno));
-
-  if (options.keep_previous && fs::is_regular_file(path, ec)) {
-    // The previous file stays as <path>.1: a hard link (atomic, no copy),
-    // else a copy; path itself is replaced atomically below.
-    const std::string prev = path + ".1";
-    fs::remove(prev, ec);
-    if (::link(path.c_str(), prev.c_str()) != 0) {
-      ec.clear();
-      fs::copy_file(path, prev, fs::copy_options::overwrite_existing, ec);
-      if (ec) fail(path, "cannot keep the previous map as " + prev + ": " + ec.message() + "; nothing replaced");
-    }
-  }
-  if (::rename(tmp_path.c_str(), path.c_str()) != 0) {
-    fail(path, "cannot replace it with " + tmp_path + ": " + std::strerror(errno));
-  }
-  tmp.keep = true;
-  // Make the rename durable too.
-  const fs::path dir = fs::path(path).has_parent_path() ? fs::path(path).parent_path() : fs::path(".");
-  const int dfd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-  if (dfd >= 0) {
-    ::fsync(dfd);
-    ::close(dfd);
-  }
+  tmp.writeAt(header, sizeof(header), 0);
+  // The previous file stays as <path>.1 when asked; path is replaced
+  // atomically.
+  tmp.commit(options.keep_previous);
 }
 
 }  // namespace fisheye_mapping

@@ -17,8 +17,36 @@
 #include <stdexcept>
 #include <utility>
 
+#include "fisheye_mapping/core/common/safe_write.h"
+
 namespace fisheye_mapping {
 namespace {
+
+// The bytes a PCL writer (by file name, 0 on success) writes, in memory; its
+// failures (a code, or pcl::IOException, which names no file) name `path`.
+template <typename Save>
+std::string pclOutput(const std::string& path, const char* what, Save save) {
+  return captureFileOutput([&](const std::string& name) {
+    int rc = -1;
+    try {
+      rc = save(name);
+    } catch (const std::exception& e) {
+      throw std::runtime_error(path + ": cannot write " + what + ": " + e.what());
+    }
+    if (rc != 0) throw std::runtime_error(path + ": cannot write " + what);
+  });
+}
+
+// A file PCL wrote into memory: after its header (ending in `end_of_header`)
+// exactly `body` bytes, else it is incomplete (std::runtime_error naming path).
+void checkFileBody(const std::string& bytes, const std::string& end_of_header, size_t body, const std::string& path) {
+  const size_t at = bytes.find(end_of_header);
+  const size_t got = at == std::string::npos ? 0 : bytes.size() - at - end_of_header.size();
+  if (at == std::string::npos || got != body) {
+    throw std::runtime_error(path + ": the writer produced " + std::to_string(got) + " bytes of data, " +
+                             std::to_string(body) + " expected; nothing saved");
+  }
+}
 
 // Cube corners in the order of PCL's tables (see pcl/surface/marching_cubes.h).
 constexpr int kCorner[8][3] = {{0, 0, 0}, {1, 0, 0}, {1, 0, 1}, {0, 0, 1},
@@ -205,7 +233,14 @@ void saveIndexedMeshPly(const IndexedMesh& mesh, const std::string& path) {
   for (size_t f = 0; f < mesh.faces.size(); ++f) {
     out.polygons[f].vertices.assign(mesh.faces[f].begin(), mesh.faces[f].end());
   }
-  if (pcl::io::savePLYFileBinary(path, out) != 0) throw std::runtime_error(path + ": cannot write PLY mesh");
+  // PCL writes by file name and does not check its stream: it writes into
+  // memory, the body's size is checked against the mesh, and the bytes go to
+  // the file through the checked writer.
+  const std::string bytes =
+      pclOutput(path, "PLY mesh", [&](const std::string& name) { return pcl::io::savePLYFileBinary(name, out); });
+  const size_t vertex_bytes = 6 * sizeof(float) + (color ? 3 : 0), face_bytes = 1 + 3 * sizeof(int32_t);
+  checkFileBody(bytes, "end_header\n", mesh.vertices.size() * vertex_bytes + mesh.faces.size() * face_bytes, path);
+  writeFileSafely(path, bytes);
 }
 
 BlockOutput TsdfMesher::computeBlock(const TsdfMap& map, const BlockIndex& index) const {
@@ -381,7 +416,12 @@ void TsdfMesher::saveCloudPcd(const std::string& path) const {
     throw std::runtime_error(path + ": the map has no surface point yet (nothing observed " +
                              std::to_string(min_observations_) + " times)");
   }
-  if (pcl::io::savePCDFileBinary(path, cloud) != 0) throw std::runtime_error(path + ": cannot write PCD cloud");
+  // As the PLY mesh: into memory, checked (x y z intensity, 4 floats a
+  // point), then through the checked writer.
+  const std::string bytes =
+      pclOutput(path, "PCD cloud", [&](const std::string& name) { return pcl::io::savePCDFileBinary(name, cloud); });
+  checkFileBody(bytes, "DATA binary\n", cloud.size() * 4 * sizeof(float), path);
+  writeFileSafely(path, bytes);
 }
 
 }  // namespace fisheye_mapping

@@ -125,9 +125,11 @@ class OnlineRigCalibrator {
   // then nothing changes.
   void startFrom(const std::string& camchain_path);
   // Writes the current rig as a Kalibr camchain at camchain_path and its mount
-  // beside it (savedMountPath), each through a temporary file renamed over the
-  // target; an existing camchain/mount is kept as <name>.1. Throws
-  // std::runtime_error naming the file.
+  // beside it (savedMountPath), each through SafeFileWriter (a temporary file
+  // beside the target, checked, renamed over it; a link there is replaced,
+  // never followed; a FIFO or a device is refused); an existing
+  // camchain/mount is kept as <name>.1. Throws std::runtime_error naming the
+  // file and the OS error.
   void saveCalibration(const std::string& camchain_path) const;
   static std::string savedMountPath(const std::string& camchain_path);
 

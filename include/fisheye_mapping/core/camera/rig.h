@@ -77,8 +77,15 @@ Rig loadPslCalibration(const std::string& calib_path, int width, int height,
 Rig loadPslCalibrationFromString(const std::string& text, const std::string& calib_name, int width,
                                  int height, const std::string& camera_name = "cam0");
 
-// Writes a rig as a Kalibr camchain plus mount YAML that loadKalibrRig reads
-// back (used by the synthetic-drive generator).
+// A rig as the text of a Kalibr camchain plus mount YAML that loadKalibrRig
+// reads back.
+struct KalibrRigText {
+  std::string camchain, mount;
+};
+KalibrRigText kalibrRigText(const Rig& rig);
+// The same written to the two files (writeFileSafely: each complete or not at
+// all, no link followed; used by the synthetic-drive generator). Throws
+// std::runtime_error naming the file and the OS error.
 void writeKalibrRig(const Rig& rig, const std::string& camchain_path,
                     const std::string& mount_path);
 

@@ -16,9 +16,14 @@ namespace fisheye_mapping {
 // end) with OpenCV's JET map; invalid pixels black.
 cv::Mat colorizeDepth(const cv::Mat& depth, double near, double far);
 
-// Writes depth as a 32-bit float TIFF (NaN kept); throws std::runtime_error
-// naming the path when it cannot.
+// Writes depth as a 32-bit float TIFF (NaN kept) through writeFileSafely
+// (core/common/safe_write.h); throws std::runtime_error naming the path (and
+// the OS error) when it cannot.
 void writeDepthTiff(const std::string& path, const cv::Mat& depth);
+// Writes an image in the format its extension names (cv::imencode: .png,
+// .jpg, .tiff, ...) through writeFileSafely; throws std::runtime_error naming
+// the path (and the OS error) when it cannot.
+void writeImageFile(const std::string& path, const cv::Mat& image);
 
 // Range -> z-depth (REP 118: metres along the optical axis, as pinhole
 // consumers such as depth_image_proc expect): z = range * ray.z with the

@@ -194,7 +194,8 @@ class World {
   // the first surface under vehicle_height and nothing else is there; -1 when
   // there is no ground.
   int8_t occupancyAt(double x, double y, double obstacle_height, double vehicle_height) const;
-  // The static scene as a triangle mesh (binary PLY), for map evaluation.
+  // The static scene as a triangle mesh (binary PLY, through writeFileSafely),
+  // for map evaluation.
   void saveStaticMeshPly(const std::string& path) const;
 
   const std::vector<Box>& staticBoxes() const { return boxes_; }

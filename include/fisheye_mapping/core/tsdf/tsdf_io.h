@@ -41,12 +41,15 @@ struct MapSaveOptions {
 };
 
 // Writes every block of `store` (options.format_version, with the store config's
-// voxel size, truncation and max_weight): <path>.tmp, synced, renamed over
-// path. Disk-swapped blocks are read one at a time (not cached); one whose
-// swap file is unreadable is lost (dropped from the store, reported through
-// its callback) and not saved. On any failure (path a directory, unwritable,
-// disk full) throws std::runtime_error naming the path and leaves no .tmp
-// behind; the store then keeps its blocks.
+// voxel size, truncation and max_weight) through SafeFileWriter: a temporary
+// file beside path (a link at path is replaced, never followed; a FIFO or a
+// device there is refused), every write, the fsync, the size and the close
+// checked, then renamed over path. Disk-swapped blocks are read one at a
+// time (not cached); one whose swap file is unreadable is lost (dropped from
+// the store, reported through its callback) and not saved. On any failure
+// (path a directory or no regular file, unwritable, disk full) throws
+// std::runtime_error naming the path and the OS error, and leaves no
+// temporary behind; the store then keeps its blocks.
 void saveMapFile(BlockStore& store, const std::string& path, const MapSaveOptions& options = MapSaveOptions());
 
 // Replaces the store's contents with the file's (BlockStore::replaceAll),

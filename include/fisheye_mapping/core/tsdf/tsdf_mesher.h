@@ -75,8 +75,11 @@ std::array<uint8_t, 3> vertexColor(MeshColoring coloring, const Eigen::Vector3f&
 std::array<uint8_t, 3> heightColor(double s);
 
 // Writes `mesh` as binary little-endian PLY through PCL: vertex x y z nx ny nz
-// [red green blue] (float, uchar), face vertex_indices (list). Throws
-// std::runtime_error naming the path on failure.
+// [red green blue] (float, uchar), face vertex_indices (list), checked for
+// completeness and saved through writeFileSafely (core/common/safe_write.h:
+// temporary file beside path, no link followed, FIFOs and devices refused,
+// fsync, size and close checked). Throws std::runtime_error naming the path
+// (and the OS error) on failure; the old file then stays as it was.
 void saveIndexedMeshPly(const IndexedMesh& mesh, const std::string& path);
 
 class TsdfMesher {
@@ -98,7 +101,8 @@ class TsdfMesher {
   // Every block's triangles welded into one mesh (weldTriangles).
   IndexedMesh indexedMesh(const MeshExportOptions& options = MeshExportOptions()) const;
   // PLY mesh (indexedMesh through saveIndexedMeshPly) and PCD cloud (binary)
-  // through PCL. Throw std::runtime_error naming the path on failure.
+  // through PCL, saved as saveIndexedMeshPly says. Throw std::runtime_error
+  // naming the path (and the OS error) on failure.
   void saveMeshPly(const std::string& path, const MeshExportOptions& options = MeshExportOptions()) const;
   void saveCloudPcd(const std::string& path) const;
 
