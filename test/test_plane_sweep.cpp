@@ -613,6 +613,33 @@ TEST(PlaneSweepFilters, InfinityFilterByHand) {
   EXPECT_EQ(cv::countNonZero(fm::applyDepthFilters(f, raw, cost, ratio, cv::Mat(), infinity) == 10.0f), 9);
 }
 
+// The sky's edge by hand: a bright sky (rows 0-19: no depth, a best cost no
+// better than infinity's) above a dark facade (rows 20-39: depth 10 m);
+// the sweep's windows fattened the facade's depth 3 rows into the sky. Those
+// rows go; the facade's own rows stay, also at the edge; a small hole in the
+// facade is not a sky.
+TEST(PlaneSweepFilters, NoParallaxEdgesDropTheFattenedBandOnly) {
+  const int w = 60, h = 40;
+  cv::Mat image(h, w, CV_8UC1, cv::Scalar(60)), raw(h, w, CV_32FC1, cv::Scalar(NAN)), cost(h, w, CV_32FC1, cv::Scalar(0.02f)),
+      infinity(h, w, CV_32FC1, cv::Scalar(0.3f)), valid(h, w, CV_8UC1, cv::Scalar(255));
+  image.rowRange(0, 20).setTo(200);
+  for (int v = 0; v < 20; v += 2) image.row(v).setTo(190);  // clouds: matched at infinity
+  infinity.rowRange(0, 20).setTo(0.02f);
+  raw.rowRange(17, h).setTo(10.0f);  // the facade and the fattened band
+  raw.at<float>(30, 30) = NAN;       // a hole in the facade
+  const cv::Mat depth = raw.clone();
+  const cv::Mat drop = fm::noParallaxEdges(depth, cost, infinity, cv::Mat(), 1.5, image, valid, 0.01, 4);
+  EXPECT_EQ(cv::countNonZero(drop.rowRange(17, 20)), 3 * w);  // the band
+  EXPECT_EQ(cv::countNonZero(drop.rowRange(20, h)), 0);       // the facade, edge included
+  // No large region that matches at infinity: nothing goes.
+  infinity.setTo(0.3f);
+  EXPECT_EQ(cv::countNonZero(fm::noParallaxEdges(depth, cost, infinity, cv::Mat(), 1.5, image, valid, 0.01, 4)), 0);
+  // Nor where the sky's windows have too little texture to be seen there.
+  infinity.rowRange(0, 20).setTo(0.02f);
+  const cv::Mat texture(h, w, CV_32FC1, cv::Scalar(1.0f));
+  EXPECT_EQ(cv::countNonZero(fm::noParallaxEdges(depth, cost, infinity, texture, 1.5, image, valid, 0.01, 4)), 0);
+}
+
 // The cost at infinity of a rendered street under an overcast sky (exact
 // cameras, the default rig at half resolution): the sky, which is at
 // infinity, matches there; surfaces within 10 m, whose parallax is several

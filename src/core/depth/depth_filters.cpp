@@ -130,5 +130,88 @@ cv::Mat applyDepthFilters(const DepthFilterConfig& config, const cv::Mat& raw, c
   return depth;
 }
 
+cv::Mat noParallaxEdges(const cv::Mat& depth, const cv::Mat& cost, const cv::Mat& infinity, const cv::Mat& texture,
+                        double min_texture_snr, const cv::Mat& image, const cv::Mat& valid, double margin, int band_px) {
+  const int w = depth.cols, h = depth.rows;
+  // Seen at infinity: a pixel with enough texture (the pixels every sweep
+  // computes alike, however much work it skips) whose best cost does not
+  // beat infinity's. Without parallax: those, and the pixels with too little
+  // texture to match at all.
+  const float min_snr = static_cast<float>(min_texture_snr);
+  cv::Mat none(h, w, CV_8UC1, cv::Scalar(0)), at_infinity(h, w, CV_8UC1, cv::Scalar(0));
+  for (int v = 0; v < h; ++v) {
+    const float* d = depth.ptr<float>(v);
+    const float* c = cost.ptr<float>(v);
+    const float* inf = infinity.ptr<float>(v);
+    const float* t = texture.empty() ? nullptr : texture.ptr<float>(v);
+    const uint8_t* ok = valid.ptr<uint8_t>(v);
+    uint8_t* out = none.ptr<uint8_t>(v);
+    uint8_t* at = at_infinity.ptr<uint8_t>(v);
+    for (int u = 0; u < w; ++u) {
+      const bool textured = !t || t[u] >= min_snr;
+      at[u] = ok[u] && textured && inf[u] == inf[u] && !(inf[u] - c[u] >= margin) ? 255 : 0;
+      out[u] = ok[u] && !(d[u] == d[u]) && (!textured || at[u]) ? 255 : 0;
+    }
+  }
+  // Only large regions (at least 0.2 % of the pixels with a ray) a tenth of
+  // which is seen to match at infinity: the sky, not the holes the filters
+  // leave in a surface nor a facade's dark, textureless windows.
+  cv::Mat labels, stats, centroids;
+  const int n = cv::connectedComponentsWithStats(none, labels, stats, centroids, 8, CV_32S);
+  const int min_area = std::max(1, static_cast<int>(0.002 * cv::countNonZero(valid)));
+  std::vector<int> matched(n, 0);
+  for (int v = 0; v < h; ++v) {
+    const int* l = labels.ptr<int>(v);
+    const uint8_t* at = at_infinity.ptr<uint8_t>(v);
+    for (int u = 0; u < w; ++u) matched[l[u]] += at[u] ? 1 : 0;
+  }
+  std::vector<uint8_t> large(n, 0);
+  for (int i = 1; i < n; ++i) {
+    const int area = stats.at<int>(i, cv::CC_STAT_AREA);
+    large[i] = area >= min_area && 10 * matched[i] >= area ? 255 : 0;
+  }
+  cv::Mat region(h, w, CV_8UC1);
+  for (int v = 0; v < h; ++v) {
+    const int* l = labels.ptr<int>(v);
+    uint8_t* out = region.ptr<uint8_t>(v);
+    for (int u = 0; u < w; ++u) out[u] = large[l[u]];
+  }
+  // The band: pixels with a depth within band_px of such a region. Their
+  // windows reach into it, so their depth may be the edge's (fattening).
+  cv::Mat near_region;
+  cv::dilate(region, near_region, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * band_px + 1, 2 * band_px + 1)));
+  cv::Mat has_depth = depth == depth;
+  const cv::Mat band = near_region & has_depth;
+  const cv::Mat inner = has_depth & ~near_region;
+  // A band pixel belongs to the side whose local mean intensity it is closer
+  // to: the region's (a fattened edge) or the surface's beyond the band.
+  cv::Mat grey, in_region, in_inner, sum_region, sum_inner, n_region, n_inner;
+  image.convertTo(grey, CV_32F);
+  region.convertTo(in_region, CV_32F, 1.0 / 255);
+  inner.convertTo(in_inner, CV_32F, 1.0 / 255);
+  const cv::Size k(4 * band_px + 1, 4 * band_px + 1);
+  cv::boxFilter(grey.mul(in_region), sum_region, CV_32F, k, cv::Point(-1, -1), false);
+  cv::boxFilter(in_region, n_region, CV_32F, k, cv::Point(-1, -1), false);
+  cv::boxFilter(grey.mul(in_inner), sum_inner, CV_32F, k, cv::Point(-1, -1), false);
+  cv::boxFilter(in_inner, n_inner, CV_32F, k, cv::Point(-1, -1), false);
+  cv::Mat drop(h, w, CV_8UC1, cv::Scalar(0));
+  for (int v = 0; v < h; ++v) {
+    const uint8_t* b = band.ptr<uint8_t>(v);
+    const float* g = grey.ptr<float>(v);
+    uint8_t* out = drop.ptr<uint8_t>(v);
+    for (int u = 0; u < w; ++u) {
+      if (!b[u]) continue;
+      const float nr = n_region.at<float>(v, u), ni = n_inner.at<float>(v, u);
+      if (nr < 0.5f) continue;
+      if (ni < 0.5f) {
+        out[u] = 255;  // nothing beyond the band to belong to
+        continue;
+      }
+      const float mr = sum_region.at<float>(v, u) / nr, mi = sum_inner.at<float>(v, u) / ni;
+      if (std::fabs(g[u] - mr) < std::fabs(g[u] - mi)) out[u] = 255;
+    }
+  }
+  return drop;
+}
 
 }  // namespace fisheye_mapping

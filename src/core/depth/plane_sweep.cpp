@@ -618,6 +618,16 @@ DepthResult PlaneSweep::compute(const SweepView& ref, const std::vector<SweepVie
   const auto t1 = std::chrono::steady_clock::now();
   result.depth = applyDepthFilters(config_.filters, result.raw_depth, result.cost, result.uniqueness, result.texture,
                                    result.infinity_cost);
+  if (config_.filters.infinity && !result.infinity_cost.empty()) {
+    // The sky's edges: the half resolution's windows reach window_half
+    // half-resolution pixels, twice as many at full resolution.
+    const int band = 2 * (config_.window_half / 2) + 1;
+    result.depth.setTo(NAN, noParallaxEdges(result.depth, result.cost, result.infinity_cost,
+                                            config_.filters.texture ? result.texture : cv::Mat(),
+                                            config_.filters.min_texture_snr,
+                                            ref.image.channels() == 1 ? ref.image : toSweepImage(ref.image, ref.name),
+                                            rays_[0].valid, config_.filters.infinity_margin, band));
+  }
   // Masked reference pixels never carry a depth (half resolution could leak).
   result.depth.setTo(NAN, ref_mask != 0);
   result.raw_depth.setTo(NAN, ref_mask != 0);

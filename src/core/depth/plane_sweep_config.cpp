@@ -97,7 +97,7 @@ const ParamTable<DepthFilterConfig>& DepthFilterConfig::params() {
         .number("delta", [](C& c) -> double& { return c.delta; }, R::between(0, 1), "",
                 "Smallest share of consistent neighbours kept", kRun)
         .flag("filter_infinity", [](C& c) -> bool& { return c.infinity; },
-              "Drop pixels whose best cost is not below the cost at infinity by infinity_margin (sky, no parallax)",
+              "Drop pixels whose best cost is not below the cost at infinity by infinity_margin (sky, no parallax), and the sky's fattened edges",
               kRun)
         .number("infinity_margin", [](C& c) -> double& { return c.infinity_margin; }, R::between(0, 1), "",
                 "Smallest amount by which the best cost must beat the cost at infinity", kRun);

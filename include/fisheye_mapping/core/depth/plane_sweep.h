@@ -91,7 +91,10 @@ struct DepthFilterConfig {
   // infinity_margin. The sky, and any surface too far or too smooth for the
   // baseline to tell from the sky (a smooth intensity gradient matches at
   // every plane), has no parallax that supports its depth: without this the
-  // winning plane of a cloudy sky is the noise's choice.
+  // winning plane of a cloudy sky is the noise's choice. Also drops the
+  // sky's fattened edges (noParallaxEdges): a textured sky is no textureless
+  // region, so windows reaching across a roof's edge give the sky beside it
+  // the roof's depth.
   bool infinity = true;
   double infinity_margin = 0.01;  // cost units ((1 - ZNCC) / 2)
   // Throws std::invalid_argument naming the parameter (params().check).
@@ -240,6 +243,18 @@ cv::Mat toSweepImage(const cv::Mat& image, const std::string& what);
 cv::Mat applyDepthFilters(const DepthFilterConfig& config, const cv::Mat& raw, const cv::Mat& cost,
                           const cv::Mat& ratio, const cv::Mat& texture = cv::Mat(),
                           const cv::Mat& infinity = cv::Mat());
+
+// The pixels of `depth` (filtered range) that lie within band_px of a large
+// region without depth of which a tenth is seen to match at infinity (a best
+// `cost` that does not beat `infinity` by `margin`, where `texture` is at
+// least min_texture_snr; empty texture: everywhere) -- the sky -- and whose
+// intensity in `image` is closer to that region's local mean than to the
+// mean of the depth beyond the band: the region's side of the edge, where
+// the matching window reached across it and took the edge's depth
+// (fattening). `valid`: the reference's pixels with a ray. CV_8UC1, 255 =
+// drop.
+cv::Mat noParallaxEdges(const cv::Mat& depth, const cv::Mat& cost, const cv::Mat& infinity, const cv::Mat& texture,
+                        double min_texture_snr, const cv::Mat& image, const cv::Mat& valid, double margin, int band_px);
 
 // Standard deviation of an image's sensor noise (image units), robust to
 // texture: the median absolute response of Immerkaer's noise operator (the
