@@ -599,7 +599,7 @@ TEST(PlaneSweepFilters, InfinityFilterByHand) {
   infinity.at<float>(1, 0) = NAN;     // no cost at infinity: kept
   fm::DepthFilterConfig f;
   f.cost = f.uniqueness = f.consistency = false;
-  ASSERT_TRUE(f.infinity);
+  f.infinity = true;
   ASSERT_DOUBLE_EQ(f.infinity_margin, 0.01);
   cv::Mat d = fm::applyDepthFilters(f, raw, cost, ratio, cv::Mat(), infinity);
   EXPECT_TRUE(std::isnan(d.at<float>(0, 0)));
@@ -803,6 +803,7 @@ cv::Mat PlaneSweepStreet::truth_, PlaneSweepStreet::mask_;
 TEST_P(PlaneSweepStreet, SkippedWorkLeavesTheFilteredDepthAsItWas) {
   fm::PlaneSweepConfig every = config(fm::parseSweepBackend(GetParam()));
   every.skip_work = false;
+  every.filters.infinity = true;  // its edges too depend only on what both compute
   fm::PlaneSweepConfig skip = every;
   skip.skip_work = true;
   skip.crop_search_planes = skip.half_search_planes = 0;  // exact: no coarse-to-fine search

@@ -170,6 +170,7 @@ cv::Mat noParallaxEdges(const cv::Mat& depth, const cv::Mat& cost, const cv::Mat
     const int area = stats.at<int>(i, cv::CC_STAT_AREA);
     large[i] = area >= min_area && 10 * matched[i] >= area ? 255 : 0;
   }
+  if (std::find(large.begin(), large.end(), 255) == large.end()) return cv::Mat(h, w, CV_8UC1, cv::Scalar(0));
   cv::Mat region(h, w, CV_8UC1);
   for (int v = 0; v < h; ++v) {
     const int* l = labels.ptr<int>(v);
@@ -178,36 +179,46 @@ cv::Mat noParallaxEdges(const cv::Mat& depth, const cv::Mat& cost, const cv::Mat
   }
   // The band: pixels with a depth within band_px of such a region. Their
   // windows reach into it, so their depth may be the edge's (fattening).
-  cv::Mat near_region;
-  cv::dilate(region, near_region, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * band_px + 1, 2 * band_px + 1)));
+  cv::Mat near_region;  // a square (separable: fast)
+  cv::dilate(region, near_region, cv::Mat::ones(2 * band_px + 1, 2 * band_px + 1, CV_8UC1));
   cv::Mat has_depth = depth == depth;
   const cv::Mat band = near_region & has_depth;
   const cv::Mat inner = has_depth & ~near_region;
   // A band pixel belongs to the side whose local mean intensity it is closer
   // to: the region's (a fattened edge) or the surface's beyond the band.
-  cv::Mat grey, in_region, in_inner, sum_region, sum_inner, n_region, n_inner;
+  // Local sums of (I in the region, region, I beyond the band, beyond the
+  // band) in one box filter.
+  cv::Mat grey, parts(h, w, CV_32FC4), sums;
   image.convertTo(grey, CV_32F);
-  region.convertTo(in_region, CV_32F, 1.0 / 255);
-  inner.convertTo(in_inner, CV_32F, 1.0 / 255);
-  const cv::Size k(4 * band_px + 1, 4 * band_px + 1);
-  cv::boxFilter(grey.mul(in_region), sum_region, CV_32F, k, cv::Point(-1, -1), false);
-  cv::boxFilter(in_region, n_region, CV_32F, k, cv::Point(-1, -1), false);
-  cv::boxFilter(grey.mul(in_inner), sum_inner, CV_32F, k, cv::Point(-1, -1), false);
-  cv::boxFilter(in_inner, n_inner, CV_32F, k, cv::Point(-1, -1), false);
+  for (int v = 0; v < h; ++v) {
+    const float* g = grey.ptr<float>(v);
+    const uint8_t* r = region.ptr<uint8_t>(v);
+    const uint8_t* in = inner.ptr<uint8_t>(v);
+    float* p = parts.ptr<float>(v);
+    for (int u = 0; u < w; ++u) {
+      const float a = r[u] ? 1.0f : 0.0f, b = in[u] ? 1.0f : 0.0f;
+      p[4 * u] = a * g[u];
+      p[4 * u + 1] = a;
+      p[4 * u + 2] = b * g[u];
+      p[4 * u + 3] = b;
+    }
+  }
+  cv::boxFilter(parts, sums, CV_32F, cv::Size(4 * band_px + 1, 4 * band_px + 1), cv::Point(-1, -1), false);
   cv::Mat drop(h, w, CV_8UC1, cv::Scalar(0));
   for (int v = 0; v < h; ++v) {
     const uint8_t* b = band.ptr<uint8_t>(v);
     const float* g = grey.ptr<float>(v);
+    const float* sm = sums.ptr<float>(v);
     uint8_t* out = drop.ptr<uint8_t>(v);
     for (int u = 0; u < w; ++u) {
       if (!b[u]) continue;
-      const float nr = n_region.at<float>(v, u), ni = n_inner.at<float>(v, u);
+      const float nr = sm[4 * u + 1], ni = sm[4 * u + 3];
       if (nr < 0.5f) continue;
       if (ni < 0.5f) {
         out[u] = 255;  // nothing beyond the band to belong to
         continue;
       }
-      const float mr = sum_region.at<float>(v, u) / nr, mi = sum_inner.at<float>(v, u) / ni;
+      const float mr = sm[4 * u] / nr, mi = sm[4 * u + 2] / ni;
       if (std::fabs(g[u] - mr) < std::fabs(g[u] - mi)) out[u] = 255;
     }
   }

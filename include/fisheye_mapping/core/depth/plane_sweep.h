@@ -94,8 +94,9 @@ struct DepthFilterConfig {
   // winning plane of a cloudy sky is the noise's choice. Also drops the
   // sky's fattened edges (noParallaxEdges): a textured sky is no textureless
   // region, so windows reaching across a roof's edge give the sky beside it
-  // the roof's depth.
-  bool infinity = true;
+  // the roof's depth. Off by default: it adds ~16 % to the multi-scale
+  // depth time (docs/depth.md, "The sky").
+  bool infinity = false;
   double infinity_margin = 0.01;  // cost units ((1 - ZNCC) / 2)
   // Throws std::invalid_argument naming the parameter (params().check).
   void validate() const;
