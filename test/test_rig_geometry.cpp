@@ -155,9 +155,10 @@ TEST(FieldOfView, UnifiedXiTwoExcludesPixelsOutsideDomain) {
 }
 
 TEST(FieldOfView, NoValidPixelGivesZero) {
-  // xi = 2 again, but the principal point 1000 px left of the image: every
-  // pixel has r >= 10 > 0.577, so none unprojects.
-  const auto cam = CameraModel::unified(makeIntrinsics(100, 100, -1000, 50, 100, 100), 2.0);
+  // xi = 2 again, but the principal point 1000 px left of the image (a crop
+  // of the image plane far right of it: a calibration saying so is refused):
+  // every pixel has r >= 10 > 0.577, so none unprojects.
+  const auto cam = CameraModel::unified(makeIntrinsics(100, 100, 50, 50, 100, 100), 2.0).cropped(1050, 0, 100, 100);
   Eigen::Vector3d ray;
   ASSERT_FALSE(cam.unproject(Eigen::Vector2d(99, 50), &ray));  // the nearest pixel
   const FieldOfView fov = computeFieldOfView(cam);
@@ -171,10 +172,10 @@ TEST(FieldOfView, NoValidPixelGivesZero) {
 // image has no valid pixel at all, it reports 177.8 deg. Enable once fixed
 // (the same holds for the horizontal span when cy is outside the image).
 TEST(FieldOfView, DISABLED_VerticalSpanIgnoresPointsOutsideImage) {
-  const auto cam = CameraModel::unified(makeIntrinsics(100, 100, -1000, 50, 100, 100), 2.0);
+  const auto cam = CameraModel::unified(makeIntrinsics(100, 100, 50, 50, 100, 100), 2.0).cropped(1050, 0, 100, 100);
   EXPECT_EQ(computeFieldOfView(cam).vertical_deg, 0.0);
   // Transposed: principal point below the image, the horizontal span.
-  const auto cam_t = CameraModel::unified(makeIntrinsics(100, 100, 50, -1000, 100, 100), 2.0);
+  const auto cam_t = CameraModel::unified(makeIntrinsics(100, 100, 50, 50, 100, 100), 2.0).cropped(0, 1050, 100, 100);
   EXPECT_EQ(computeFieldOfView(cam_t).horizontal_deg, 0.0);
 }
 
@@ -377,7 +378,7 @@ TEST(Overlap, FisheyeBackToBack) {
 TEST(Overlap, NoValidPixelGivesZero) {
   // No pixel of `dead` unprojects (see FieldOfView.NoValidPixelGivesZero).
   const RigCamera dead = rigCamera(
-      CameraModel::unified(makeIntrinsics(100, 100, -1000, 50, 100, 100), 2.0),
+      CameraModel::unified(makeIntrinsics(100, 100, 50, 50, 100, 100), 2.0).cropped(1050, 0, 100, 100),
       Eigen::Isometry3d::Identity());
   const RigCamera live = rigCamera(test::realisticCameras()[1].second, Eigen::Isometry3d::Identity());
   EXPECT_EQ(computeOverlap(dead, live), 0.0);  // no sample at all
