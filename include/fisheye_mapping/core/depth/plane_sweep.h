@@ -280,8 +280,15 @@ std::vector<int> selectSupportViews(const PlaneSweepConfig& config, const Camera
                                     const std::vector<SweepView>& views, std::vector<std::string>* reasons);
 
 // What a backend gets for one scale.
+// The scales of a sweep (SweepLevel::id; the slots of per-scale caches).
+enum SweepSlot : int { kSlotFull = 0, kSlotHalf = 1, kSlotCrop = 2, kSlotQuarter = 3, kSweepSlots = 4 };
+
+namespace sweep_work {
+struct CoarsePrior;
+}
+
 struct SweepLevel {
-  int id = 0;                       // scale slot (0 full, 1 half, 2 crop, 3 quarter)
+  int id = 0;                       // SweepSlot
   unsigned rays_version = 0;        // changes whenever `rays` changes
   const std::vector<float>* rays = nullptr;  // 3 per pixel; zero = masked / invalid
   int width = 0, height = 0;
@@ -336,7 +343,7 @@ class InfinityCost {
     std::vector<std::vector<Sample>> samples;  // per view, per pixel
   };
   const std::vector<Sample>& samples(const SweepLevel& level, int view);
-  Cache cache_[4];  // per level slot
+  Cache cache_[kSweepSlots];
 };
 std::unique_ptr<SweepBackend> makeNativeSweepBackend();
 std::unique_ptr<SweepBackend> makeOpenClSweepBackend(const std::string& device);
@@ -366,7 +373,10 @@ class PlaneSweep {
                       const Eigen::Isometry3d* T_base_ref);
 
  private:
-  struct Scale;
+  struct Frame;
+  struct LevelOutput;
+  LevelOutput sweepLevel(Frame& frame, int slot, const sweep_work::CoarsePrior* prior, bool with_infinity);
+  void sweepScales(Frame& frame, DepthResult* result);
   const std::vector<float>& raysFor(int slot, const CameraModel& camera, const cv::Mat& mask, unsigned* version);
 
   PlaneSweepConfig config_;
@@ -378,7 +388,7 @@ class PlaneSweep {
     cv::Mat valid;  // CV_8UC1, 255 where `rays` has a ray (not masked, in the image)
     unsigned version = 0;
   };
-  RayCache rays_[4];
+  RayCache rays_[kSweepSlots];
   InfinityCost infinity_;
 };
 
