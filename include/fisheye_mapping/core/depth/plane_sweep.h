@@ -279,7 +279,6 @@ cv::Mat texturelessRegions(const cv::Mat& image, const cv::Mat& valid, double mi
 std::vector<int> selectSupportViews(const PlaneSweepConfig& config, const CameraModel& ref,
                                     const std::vector<SweepView>& views, std::vector<std::string>* reasons);
 
-// What a backend gets for one scale.
 // The scales of a sweep (SweepLevel::id; the slots of per-scale caches).
 enum SweepSlot : int { kSlotFull = 0, kSlotHalf = 1, kSlotCrop = 2, kSlotQuarter = 3, kSweepSlots = 4 };
 
@@ -287,6 +286,7 @@ namespace sweep_work {
 struct CoarsePrior;
 }
 
+// What a backend gets for one scale.
 struct SweepLevel {
   int id = 0;                       // SweepSlot
   unsigned rays_version = 0;        // changes whenever `rays` changes
