@@ -142,6 +142,35 @@ TEST(OfflineMapper, ReadsCompressedImagesFromOtherTopicsAndSyncsApproximately) {
     EXPECT_EQ(differ, 0) << name;
     EXPECT_GT(valid, 1000) << name;  // a real depth map (about 2500 of 34816 pixels pass the filters), not an empty one
   }
+  // plane_sweep_depth's bag mode goes through the same core stages (the
+  // sync's FrameSetSync, DepthStage): the compressed bag on renamed topics
+  // gives the same depth as the raw one; without --max-sets every frame set
+  // of the bag is accounted for.
+  {
+    const std::string psd = std::string(FM_PLANE_SWEEP_DEPTH) + kRig +
+                            " --set resolution=full --set min_parallax_px=0.05 --set self_calibration=false --max-sets 2";
+    out = run(psd + " --bag " + raw_bag + " --out " + kInputs + "/psd_raw", &rc);
+    ASSERT_EQ(WEXITSTATUS(rc), 0) << out;
+    EXPECT_NE(out.find("2 depth maps written to " + kInputs + "/psd_raw (--max-sets reached)"), std::string::npos) << out;
+    out = run(psd + " --bag " + kInputs + "/compressed.bag" + remap + " --out " + kInputs + "/psd_comp", &rc);
+    ASSERT_EQ(WEXITSTATUS(rc), 0) << out;
+    const auto psd_raw = savedDepth(kInputs + "/psd_raw"), psd_comp = savedDepth(kInputs + "/psd_comp");
+    ASSERT_EQ(psd_raw.size(), 2u);
+    ASSERT_EQ(psd_comp.size(), 2u);
+    for (const auto& [name, depth] : psd_raw) {
+      ASSERT_TRUE(psd_comp.count(name)) << name;
+      EXPECT_EQ(compareDepth(depth, psd_comp.at(name)).first, 0) << name;
+    }
+    // Every frame set of the bag, accounted for.
+    out = run(std::string(FM_PLANE_SWEEP_DEPTH) + kRig + " --set resolution=full --bag " + raw_bag + " --out " +
+                  kInputs + "/psd_all",
+              &rc);
+    ASSERT_EQ(WEXITSTATUS(rc), 0) << out;
+    EXPECT_NE(out.find("4 depth maps written to " + kInputs + "/psd_all (of the 4 frame sets in the bag: 0 incomplete"),
+              std::string::npos)
+        << out;
+  }
+
   // Without --topic the renamed bag has none of the camchain's topics.
   out = run(mapper(kInputs + "/compressed.bag", kInputs + "/comp2", ""), &rc);
   EXPECT_EQ(WEXITSTATUS(rc), 1) << out;

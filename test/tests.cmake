@@ -50,7 +50,7 @@ fm_add_test(test_tsdf_lifecycle_node ROSTEST test/launch/tsdf_lifecycle.test
   SOURCES test/test_tsdf_lifecycle_node.cpp DEPENDS fisheye_mapping_nodelets)
 
 # --- the whole pipeline ----------------------------------------------------
-fm_add_test(test_offline_mapper SOURCES test/test_offline_mapper.cpp DEPENDS offline_mapper make_drive)
+fm_add_test(test_offline_mapper SOURCES test/test_offline_mapper.cpp DEPENDS offline_mapper make_drive plane_sweep_depth)
 fm_add_test(test_multihost SOURCES test/test_multihost.cpp DEPENDS fisheye_mapping_nodelets make_drive)
 fm_add_test(test_vehicle_e2e_node ROSTEST test/launch/vehicle_e2e.test
   SOURCES test/test_vehicle_e2e_node.cpp DEPENDS fisheye_mapping_nodelets make_drive paced_player offline_mapper)

@@ -7,7 +7,12 @@
 #include <stdexcept>
 #include <string>
 
+#include <set>
+
+#include <rosbag/view.h>
+
 #include "fisheye_mapping/core/common/safe_open.h"
+#include "fisheye_mapping/ros/conversions.h"
 
 namespace fisheye_mapping {
 namespace {
@@ -72,6 +77,28 @@ void openBagForReading(rosbag::Bag& bag, const std::string& path) {
                              ". Recover its complete chunks with `" + rosbagReindexCommand(path) +
                              "` (rosbag keeps the original beside it as <name>.orig.<ext>), then run again");
   }
+}
+
+std::optional<BagImage> BagImage::of(const rosbag::MessageInstance& m) {
+  if (auto img = m.instantiate<sensor_msgs::Image>()) return BagImage{img, nullptr};
+  if (auto img = m.instantiate<sensor_msgs::CompressedImage>()) return BagImage{nullptr, img};
+  return std::nullopt;
+}
+
+cv::Mat BagImage::sweepImage(const std::string& source) const {
+  return raw ? toCvImageShare(raw, ImageTarget::kSweep, source) : toGrey(*compressed, source);
+}
+
+cv::Mat BagImage::greyImage(const std::string& source) const {
+  return raw ? toCvImageShare(raw, ImageTarget::kGrey8, source) : toGrey(*compressed, source);
+}
+
+std::vector<std::string> imageTopicsInBag(rosbag::Bag& bag, std::vector<std::string> topics) {
+  std::set<std::string> in_bag;
+  for (const rosbag::ConnectionInfo* c : rosbag::View(bag).getConnections()) in_bag.insert(c->topic);
+  for (std::string& t : topics)
+    if (!in_bag.count(t) && in_bag.count(t + "/compressed")) t += "/compressed";
+  return topics;
 }
 
 }  // namespace fisheye_mapping

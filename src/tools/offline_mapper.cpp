@@ -151,28 +151,6 @@ double median(std::vector<double> v) {
   return v[v.size() / 2];
 }
 
-// One camera image of the bag, raw or compressed; decoded only when its frame
-// set is mapped.
-struct BagImage {
-  sensor_msgs::Image::ConstPtr raw;
-  sensor_msgs::CompressedImage::ConstPtr compressed;
-
-  static std::optional<BagImage> of(const rosbag::MessageInstance& m) {
-    if (auto img = m.instantiate<sensor_msgs::Image>()) return BagImage{img, nullptr};
-    if (auto img = m.instantiate<sensor_msgs::CompressedImage>()) return BagImage{nullptr, img};
-    return std::nullopt;
-  }
-  const std_msgs::Header& header() const { return raw ? raw->header : compressed->header; }
-  // Raw images decoded as the depth nodelet decodes them (ros/conversions.h),
-  // compressed ones to 8-bit grey.
-  cv::Mat sweepImage(const std::string& source) const {
-    return raw ? fm::toCvImageShare(raw, fm::ImageTarget::kSweep, source) : fm::toGrey(*compressed, source);
-  }
-  cv::Mat greyImage(const std::string& source) const {  // mono8
-    return raw ? fm::toCvImageShare(raw, fm::ImageTarget::kGrey8, source) : fm::toGrey(*compressed, source);
-  }
-};
-
 // --topic CAM=TOPIC, checked: both parts present.
 std::pair<std::string, std::string> parseTopicOption(const std::string& text) {
   const size_t eq = text.find('=');
@@ -334,13 +312,7 @@ int main(int argc, char** argv) {
 
     // Pass 2: frame sets. A camera topic the bag lacks is read from
     // <topic>/compressed when the bag has that (image_transport's name).
-    std::vector<std::string> camera_topics = configured_topics;
-    {
-      std::set<std::string> in_bag;
-      for (const rosbag::ConnectionInfo* c : rosbag::View(bag).getConnections()) in_bag.insert(c->topic);
-      for (std::string& t : camera_topics)
-        if (!in_bag.count(t) && in_bag.count(t + "/compressed")) t += "/compressed";
-    }
+    const std::vector<std::string> camera_topics = fm::imageTopicsInBag(bag, configured_topics);
     std::vector<std::string> topics = camera_topics;
     std::map<std::string, int> cam_of;
     for (size_t c = 0; c < topics.size(); ++c) cam_of[topics[c]] = int(c);
@@ -354,7 +326,7 @@ int main(int argc, char** argv) {
     if (max_frames > 0) total_sets = std::min<size_t>(total_sets, max_frames);
     // Ground-truth depth and the reference image: rendered together, exact stamps.
     const bool gt_depth = depth_src == "gt";
-    fm::FrameSetSync<BagImage> sync(gt_depth ? 2 : int(rig.cameras.size()),
+    fm::FrameSetSync<fm::BagImage> sync(gt_depth ? 2 : int(rig.cameras.size()),
                                     gt_depth ? fm::SyncPolicy::Exact : sync_cfg.policy, sync_cfg.max_interval,
                                     std::size_t(sync_cfg.queue_size), sync_cfg.time_reset_threshold);
     const int ref_slot = depth_src == "gt" ? 0 : ref;
@@ -451,7 +423,7 @@ int main(int argc, char** argv) {
       }
     };
     for (const rosbag::MessageInstance& m : images) {
-      const std::optional<BagImage> img = BagImage::of(m);
+      const std::optional<fm::BagImage> img = fm::BagImage::of(m);
       if (!img) {
         if (not_images.insert(m.getTopic()).second)
           std::fprintf(stderr, "\noffline_mapper: %s holds %s, not sensor_msgs/Image or CompressedImage: ignored\n",

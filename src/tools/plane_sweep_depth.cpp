@@ -1,17 +1,22 @@
-// plane_sweep_depth: offline plane-sweep depth with the same core as the
-// nodelet (rosrun fisheye_mapping plane_sweep_depth ...).
+// plane_sweep_depth: offline plane-sweep depth through the core depth stage
+// (DepthStage: the nodelet's views, self-masks and online rotation
+// self-calibration) (rosrun fisheye_mapping plane_sweep_depth ...).
 //
 // Images mode:
 //   plane_sweep_depth --camchain F --mount F --reference cam0
 //                     --image cam0=a.png --image cam1=b.png ... [--mask cam0=m.png]
 //                     --out PREFIX [--config YAML] [--set key=value ...]
 //   writes PREFIX_depth.tiff (32-bit float, range along the ray, NaN invalid),
-//   PREFIX_depth.png (colour-coded inverse depth) and PREFIX_cost.tiff.
+//   PREFIX_depth.png (colour-coded inverse depth) and PREFIX_cost.tiff; with a
+//   self-calibration correction, PREFIX_self_calibrated_camchain.yaml (+ _mount).
 // Bag mode:
 //   plane_sweep_depth --camchain F --mount F --reference cam0 --bag drive.bag
-//                     --out DIR [--topic camN=/topic ...] [--max-sets N]
-//   groups the rig's image topics (the camchain's rostopic, or --topic) by
-//   exact stamp and writes DIR/depth_<stamp>.tiff per complete frame set.
+//                     --out DIR [--topic camN=/topic ...] [--max-sets N] [--sync exact|approximate]
+//   groups the rig's image topics (the camchain's rostopic, or --topic; raw or
+//   <topic>/compressed) into frame sets with the core FrameSetSync (the sync
+//   nodelet's) and writes DIR/depth_<stamp>.tiff per frame set, and
+//   DIR/self_calibrated_camchain.yaml (+ _mount) when the self-calibration
+//   corrected the rig.
 #include <chrono>
 #include <filesystem>
 #include <iomanip>
@@ -27,12 +32,13 @@
 #include <yaml-cpp/yaml.h>
 
 #include "cli.h"
-#include "fisheye_mapping/ros/bag_reading.h"
-#include "fisheye_mapping/core/depth/depth_image.h"
+#include "fisheye_mapping/core/camera/rig.h"
 #include "fisheye_mapping/core/common/params.h"
+#include "fisheye_mapping/core/depth/depth_image.h"
 #include "fisheye_mapping/core/depth/depth_stage.h"
 #include "fisheye_mapping/core/depth/plane_sweep.h"
-#include "fisheye_mapping/core/camera/rig.h"
+#include "fisheye_mapping/core/sync/frame_sync.h"
+#include "fisheye_mapping/ros/bag_reading.h"
 #include "fisheye_mapping/ros/conversions.h"
 #include "fisheye_mapping/ros/param_registry.h"
 
@@ -42,21 +48,30 @@ namespace {
 
 const char* kUsage =
     "usage: plane_sweep_depth --camchain F --mount F [--reference cam0] [--config YAML] [--set key=value]...\n"
-    "         (--image CAM=FILE ... [--mask CAM=FILE ...] --out PREFIX\n"
-    "          | --bag FILE --out DIR [--topic CAM=TOPIC ...] [--max-sets N])\n"
-    "  --camchain F, --mount F  the rig (Kalibr camchain and mount)\n"
-    "  --reference CAM      the camera whose depth is computed (default cam0)\n"
-    "  --config YAML        plane-sweep parameters (as config/plane_sweep_depth.yaml)\n"
+    "         [--mask CAM=FILE ...] (--image CAM=FILE ... --out PREFIX\n"
+    "          | --bag FILE --out DIR [--topic CAM=TOPIC ...] [--max-sets N] [--sync exact|approximate]\n"
+    "            [--sync-tolerance S])\n"
+    "  --camchain F, --mount F  the rig (Kalibr camchain and mount), the calibration as given\n"
+    "  --reference CAM      the camera whose depth is computed (default: the config's reference_camera, cam0)\n"
+    "  --config YAML        depth-stage parameters (as config/plane_sweep_depth.yaml: the sweep, support_cameras,\n"
+    "                       self_masks, self_calibration_*)\n"
     "  --set KEY=VALUE      overrides one parameter (repeatable)\n"
     "  --image CAM=FILE     one camera's image (images mode; one per camera)\n"
-    "  --mask CAM=FILE      one camera's self-mask (images mode)\n"
+    "  --mask CAM=FILE      one camera's self-mask (0 where it sees the car; as self_masks)\n"
     "  --out PREFIX|DIR     images mode: PREFIX_depth.tiff, PREFIX_depth.png, PREFIX_cost.tiff;\n"
-    "                       bag mode: DIR/depth_<stamp>.tiff per complete frame set\n"
-    "  --bag FILE           bag mode: frame sets grouped by exact stamp\n"
-    "  --topic CAM=TOPIC    bag mode: the camera's image topic (default: the camchain's rostopic)\n"
+    "                       bag mode: DIR/depth_<stamp>.tiff per frame set;\n"
+    "                       both: the self-calibrated camchain when the rig was corrected\n"
+    "                       (PREFIX_self_calibrated_camchain.yaml, DIR/self_calibrated_camchain.yaml)\n"
+    "  --bag FILE           bag mode: the images grouped into frame sets as the sync nodelet groups them\n"
+    "  --topic CAM=TOPIC    bag mode: the camera's image topic (default: the camchain's rostopic, else\n"
+    "                       /CAM/image_raw; <topic>/compressed is read when the bag has only that)\n"
     "  --max-sets N         bag mode: at most N frame sets (default: all)\n"
+    "  --sync POLICY        bag mode: exact (default) or approximate stamps\n"
+    "  --sync-tolerance S   bag mode: largest stamp spread of an approximate set (default 0.005 s)\n"
+    "  The online rotation self-calibration is on, as in the nodelet (self_calibration; off:\n"
+    "  --set self_calibration=false): the supporting cameras' rotations are corrected from the first\n"
+    "  frame set on (self_calibration_first_set), and the depth is swept with the corrected rig.\n"
     "  Depth is 32-bit float TIFF: metres of range along each pixel's ray, NaN invalid.\n";
-
 
 std::pair<std::string, std::string> split(const std::string& kv, const std::string& what) {
   const size_t eq = kv.find('=');
@@ -64,10 +79,10 @@ std::pair<std::string, std::string> split(const std::string& kv, const std::stri
   return {kv.substr(0, eq), kv.substr(eq + 1)};
 }
 
-// The plane-sweep configuration of a YAML file (the names of
+// The depth stage's configuration of a YAML file (the names of
 // config/plane_sweep_depth.yaml) with --set overrides, read by the same core
 // function as the nodelet's.
-fm::PlaneSweepConfig readConfig(const std::string& path, const std::vector<std::pair<std::string, std::string>>& sets) {
+fm::DepthStageConfig readConfig(const std::string& path, const std::vector<std::pair<std::string, std::string>>& sets) {
   YAML::Node y(YAML::NodeType::Map);
   if (!path.empty()) {
     try {
@@ -82,8 +97,7 @@ fm::PlaneSweepConfig readConfig(const std::string& path, const std::vector<std::
   // Every name the depth nodelet declares is known (the same file configures
   // it); anything else is an error naming the key and the known ones.
   fm::nodeParamSet("plane_sweep").requireKnown(fm::yamlKeys(y), path.empty() ? "--set" : path);
-  const fm::PlaneSweepConfig config = fm::PlaneSweepConfig::fromParams(yaml);
-  return config;
+  return fm::DepthStageConfig::fromParams(yaml);
 }
 
 void writeOutputs(const std::string& prefix, const fm::DepthResult& r, const fm::PlaneSweepConfig& c) {
@@ -92,11 +106,31 @@ void writeOutputs(const std::string& prefix, const fm::DepthResult& r, const fm:
   fm::writeImageFile(prefix + "_depth.png", fm::colorizeDepth(r.depth, c.near, c.far));
 }
 
+// The self-calibration's state, one line per supporting camera, and the
+// corrected camchain written to `camchain` when the rig was corrected.
+void reportCalibration(const fm::DepthStage& stage, const std::string& camchain) {
+  const fm::OnlineRigCalibrator* cal = stage.selfCalibration();
+  if (!cal) return;
+  for (const auto& c : cal->state()) {
+    if (c.reference) continue;
+    std::cout << "self-calibration " << c.name << ": correction " << std::fixed << std::setprecision(3)
+              << c.correction_deg << " deg, " << (c.warn ? "WARN " : "") << c.status << "\n";
+  }
+  if (!cal->lastNote().empty()) std::cout << "self-calibration: " << cal->lastNote() << "\n";
+  if (cal->changed()) {
+    stage.saveCalibration(camchain);
+    std::cout << "self-calibration: wrote " << camchain << " and " << fm::OnlineRigCalibrator::savedMountPath(camchain)
+              << "\n";
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   std::map<std::string, std::string> one;
   std::vector<std::pair<std::string, std::string>> images, masks, topics, sets;
+  std::optional<fm::SyncPolicy> sync_policy;
+  std::optional<double> sync_tolerance;
   const int rc = fm::cli::parseCommandLine("plane_sweep_depth", kUsage, [&] {
     fm::cli::forEachOption(argc, argv, 1, [&](const std::string& k, const fm::cli::NextValue& next) {
       static const std::set<std::string> kSingle = {"--camchain", "--mount", "--out", "--bag", "--reference", "--config"};
@@ -105,7 +139,15 @@ int main(int argc, char** argv) {
       else if (k == "--topic") topics.push_back(split(next(), k));
       else if (k == "--set") sets.push_back(split(next(), k));
       else if (k == "--max-sets") one["max-sets"] = std::to_string(fm::cli::parseInt(k, next(), 1, 100000000));
-      else if (kSingle.count(k)) one[k.substr(2)] = next();
+      else if (k == "--sync-tolerance") sync_tolerance = fm::cli::parseDouble(k, next(), 0.0, 1.0);
+      else if (k == "--sync") {
+        const std::string v = next();
+        try {
+          sync_policy = fm::parseSyncPolicy(v);
+        } catch (const std::invalid_argument&) {
+          throw fm::cli::UsageError("--sync must be exact or approximate, got '" + v + "'");
+        }
+      } else if (kSingle.count(k)) one[k.substr(2)] = next();
       else return false;
       return true;
     });
@@ -126,99 +168,116 @@ int main(int argc, char** argv) {
   if (rc >= 0) return rc;
   try {
     const fm::Rig rig = fm::loadKalibrRig(one["camchain"], one["mount"]);
-    const std::string ref_name = one.count("reference") ? one["reference"] : "cam0";
-    const int ref = rig.indexOf(rig.camera(ref_name).name);
-    const fm::PlaneSweepConfig config = readConfig(one.count("config") ? one["config"] : "", sets);
-    fm::PlaneSweep sweep(config);
-    std::cerr << "plane_sweep_depth: " << sweep.backendName() << ", reference " << ref_name << "\n";
-    const Eigen::Isometry3d T_base_ref = rig.cameras[ref].T_base_cam;
+    fm::DepthStageConfig config = readConfig(one.count("config") ? one["config"] : "", sets);
+    if (one.count("reference")) config.reference_camera = rig.camera(one["reference"]).name;
+    for (const auto& [cam, path] : masks) {
+      const std::string name = rig.camera(cam).name;
+      // Read here first: its errors name the option (the stage reads it again).
+      fm::readImageFile(path, cv::IMREAD_GRAYSCALE, "--mask " + cam + ":");
+      config.self_masks[name] = path;
+    }
+    config.validate();
+    fm::DepthStage stage(rig, config);
+    const std::string ref_name = rig.cameras[stage.reference()].name;
+    std::cerr << "plane_sweep_depth: " << stage.backendName() << ", reference " << ref_name << ", self-calibration "
+              << (stage.selfCalibration() ? "on" : "off") << "\n";
 
     if (!images.empty()) {
-      std::vector<cv::Mat> img(rig.cameras.size()), mask(rig.cameras.size());
+      std::vector<cv::Mat> img(rig.cameras.size());
       for (const auto& [cam, path] : images) {
         const int i = rig.indexOf(rig.camera(cam).name);
         // A regular file that decodes completely (a JPEG cut short is an error, not grey pixels).
         img[i] = fm::readImageFile(path, cv::IMREAD_UNCHANGED, "--image " + cam + ":");
         fm::checkImageSize(rig.cameras[i], img[i].cols, img[i].rows);
       }
-      for (const auto& [cam, path] : masks) {
-        const int i = rig.indexOf(rig.camera(cam).name);
-        mask[i] = fm::readImageFile(path, cv::IMREAD_GRAYSCALE, "--mask " + cam + ":");
-      }
-      if (img[ref].empty()) throw std::runtime_error("no --image for the reference camera " + ref_name);
-      std::vector<fm::SweepView> views;
-      for (size_t i = 0; i < rig.cameras.size(); ++i) {
-        if (static_cast<int>(i) != ref && !img[i].empty()) views.push_back(fm::rigSweepView(rig, i, ref, img[i], mask[i]));
-      }
-      const fm::DepthResult r = sweep.compute(fm::rigSweepView(rig, ref, ref, img[ref], mask[ref]), views, &T_base_ref);
+      if (img[stage.reference()].empty()) throw std::runtime_error("no --image for the reference camera " + ref_name);
+      const fm::DepthResult r = stage.compute(img);
       for (const auto& d : r.dropped_views) std::cerr << "plane_sweep_depth: dropped " << d << "\n";
       for (const auto& w : r.warnings) std::cerr << "plane_sweep_depth: warning: " << w << "\n";
-      writeOutputs(one["out"], r, config);
+      writeOutputs(one["out"], r, stage.sweepConfig());
       std::cout << "depth: " << cv::countNonZero(r.depth == r.depth) << " valid pixels of " << r.depth.total() << ", "
                 << std::fixed << std::setprecision(1) << r.total_ms << " ms; wrote " << one["out"]
                 << "_depth.tiff, _depth.png, _cost.tiff\n";
+      reportCalibration(stage, one["out"] + "_self_calibrated_camchain.yaml");
       return 0;
     }
 
-    // Bag mode.
-    std::map<std::string, int> topic_cam;
-    for (size_t i = 0; i < rig.cameras.size(); ++i) {
-      if (!rig.cameras[i].rostopic.empty()) topic_cam[rig.cameras[i].rostopic] = static_cast<int>(i);
-    }
-    for (const auto& [cam, topic] : topics) {
-      for (auto it = topic_cam.begin(); it != topic_cam.end();) it = it->second == rig.indexOf(cam) ? topic_cam.erase(it) : ++it;
-      topic_cam[topic] = rig.indexOf(rig.camera(cam).name);
-    }
-    std::vector<std::string> topic_list;
-    for (const auto& kv : topic_cam) topic_list.push_back(kv.first);
+    // Bag mode: each camera's topic (--topic, else the camchain's rostopic,
+    // else /<cam>/image_raw; <topic>/compressed when the bag has only that).
+    std::vector<std::string> cam_topics;
+    for (const auto& cam : rig.cameras) cam_topics.push_back(cam.rostopic.empty() ? "/" + cam.name + "/image_raw" : cam.rostopic);
+    for (const auto& [cam, topic] : topics) cam_topics[rig.indexOf(rig.camera(cam).name)] = topic;
+    for (size_t c = 0; c < cam_topics.size(); ++c)
+      for (size_t d = 0; d < c; ++d)
+        if (cam_topics[c] == cam_topics[d])
+          throw fm::cli::UsageError("cameras " + rig.cameras[d].name + " and " + rig.cameras[c].name + " both read " +
+                                    cam_topics[c] + " (give each its own with --topic)");
     rosbag::Bag bag;
     fm::openBagForReading(bag, one["bag"]);  // a bag cut short: the rosbag reindex command
-    rosbag::View view(bag, rosbag::TopicQuery(topic_list));
+    cam_topics = fm::imageTopicsInBag(bag, cam_topics);
+    std::map<std::string, int> topic_cam;
+    for (size_t c = 0; c < cam_topics.size(); ++c) topic_cam[cam_topics[c]] = int(c);
+    rosbag::View view(bag, rosbag::TopicQuery(cam_topics));
     const size_t total_msgs = view.size();
     if (total_msgs == 0) throw std::runtime_error(one["bag"] + ": none of the rig's image topics is in the bag");
     const std::string out = one["out"];
     std::filesystem::create_directories(out);
     const int max_sets = one.count("max-sets") ? std::stoi(one["max-sets"]) : -1;
-    std::map<ros::Time, std::vector<cv::Mat>> pending;
-    size_t seen = 0, done = 0, incomplete = 0;
+    fm::FrameSyncConfig sync_cfg;
+    if (sync_policy) sync_cfg.policy = *sync_policy;
+    if (sync_tolerance) sync_cfg.max_interval = *sync_tolerance;
+    sync_cfg.validate();
+    fm::FrameSetSync<fm::BagImage> sync(int(rig.cameras.size()), sync_cfg.policy, sync_cfg.max_interval,
+                                        std::size_t(sync_cfg.queue_size), sync_cfg.time_reset_threshold);
+    size_t seen = 0, done = 0, undecodable = 0;
+    bool stopped = false;
+    std::set<std::string> not_images;
     const auto t0 = std::chrono::steady_clock::now();
     for (const rosbag::MessageInstance& m : view) {
       ++seen;
-      auto msg = m.instantiate<sensor_msgs::Image>();
-      if (!msg) continue;
-      const int cam = topic_cam[m.getTopic()];
-      auto& slot = pending[msg->header.stamp];
-      slot.resize(rig.cameras.size());
-      try {
-        slot[cam] = fm::toCvImage(*msg, fm::ImageTarget::kSweep, m.getTopic());
-      } catch (const std::exception& e) {
-        std::cerr << "\nplane_sweep_depth: " << m.getTopic() << " at " << msg->header.stamp << ": " << e.what() << "\n";
+      const std::optional<fm::BagImage> msg = fm::BagImage::of(m);
+      if (!msg) {
+        if (not_images.insert(m.getTopic()).second)
+          std::cerr << "\nplane_sweep_depth: " << m.getTopic() << " holds " << m.getDataType()
+                    << ", not sensor_msgs/Image or CompressedImage: ignored\n";
+        continue;
       }
-      bool complete = true;
-      for (const auto& im : slot) complete = complete && !im.empty();
-      if (!complete) continue;
-      std::vector<fm::SweepView> views;
-      for (size_t i = 0; i < rig.cameras.size(); ++i) {
-        if (static_cast<int>(i) != ref) views.push_back(fm::rigSweepView(rig, i, ref, slot[i]));
+      for (auto& set : sync.add(topic_cam[m.getTopic()], std::int64_t(msg->header().stamp.toNSec()), *msg)) {
+        const ros::Time stamp = set[stage.reference()].header().stamp;
+        std::vector<cv::Mat> imgs;
+        try {
+          for (size_t c = 0; c < set.size(); ++c) imgs.push_back(set[c].sweepImage(cam_topics[c]));
+        } catch (const std::exception& e) {
+          ++undecodable;
+          std::cerr << "\nplane_sweep_depth: frame set " << stamp << " skipped: undecodable image: " << e.what() << "\n";
+          continue;
+        }
+        const fm::DepthResult r = stage.compute(imgs);
+        std::ostringstream name;
+        name << out << "/depth_" << stamp.sec << "." << std::setw(9) << std::setfill('0') << stamp.nsec;
+        fm::writeDepthTiff(name.str() + ".tiff", r.depth);
+        ++done;
+        const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        std::cerr << "\r[" << std::setw(3) << 100 * seen / total_msgs << "%] " << done << " depth maps, " << std::fixed
+                  << std::setprecision(2) << done / s << " sets/s" << std::flush;
+        if (max_sets > 0 && int(done) >= max_sets) {
+          stopped = true;
+          break;
+        }
       }
-      const fm::DepthResult r = sweep.compute(fm::rigSweepView(rig, ref, ref, slot[ref]), views, &T_base_ref);
-      std::ostringstream name;
-      name << out << "/depth_" << msg->header.stamp.sec << "." << std::setw(9) << std::setfill('0') << msg->header.stamp.nsec;
-      fm::writeDepthTiff(name.str() + ".tiff", r.depth);
-      ++done;
-      // Older incomplete sets will never complete (bags are in time order).
-      for (auto it = pending.begin(); it != pending.end() && it->first <= msg->header.stamp;) {
-        if (it->first < msg->header.stamp) ++incomplete;
-        it = pending.erase(it);
-      }
-      const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-      std::cerr << "\r[" << std::setw(3) << 100 * seen / total_msgs << "%] " << done << " depth maps, "
-                << std::fixed << std::setprecision(2) << done / s << " sets/s" << std::flush;
-      if (max_sets > 0 && static_cast<int>(done) >= max_sets) break;
+      if (stopped) break;
     }
+    if (!stopped) sync.finish();
     std::cerr << "\n";
-    std::cout << done << " depth maps written to " << out << " (" << incomplete + pending.size()
-              << " incomplete frame sets skipped)\n";
+    const auto& st = sync.stats();
+    std::cout << done << " depth maps written to " << out;
+    if (stopped) std::cout << " (--max-sets reached)";
+    else
+      std::cout << " (of the " << st.sets() << " frame sets in the bag: " << st.dropped_incomplete << " incomplete, "
+                << st.sets_backwards << " stamps backwards, " << st.sets_duplicate << " duplicate stamp, "
+                << st.sets_stale << " old timeline, " << undecodable << " undecodable image)";
+    std::cout << "\n";
+    reportCalibration(stage, out + "/self_calibrated_camchain.yaml");
     return 0;
   } catch (const std::exception& e) {
     std::cerr << "plane_sweep_depth: " << e.what() << "\n";

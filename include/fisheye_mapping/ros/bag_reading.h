@@ -9,8 +9,15 @@
 #define FISHEYE_MAPPING_ROS_BAG_READING_H_
 
 #include <rosbag/bag.h>
+#include <rosbag/message_instance.h>
+#include <sensor_msgs/CompressedImage.h>
+#include <sensor_msgs/Image.h>
 
+#include <optional>
 #include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
 
 namespace fisheye_mapping {
 
@@ -29,6 +36,27 @@ std::string rosbagReindexCommand(const std::string& path);
 /// the bag: for an unindexed or truncated bag, what bagIndexProblem() found
 /// and rosbagReindexCommand(); otherwise librosbag's error.
 void openBagForReading(rosbag::Bag& bag, const std::string& path);
+
+/// One camera image of a bag, raw (sensor_msgs/Image) or compressed
+/// (sensor_msgs/CompressedImage); decoded only when its frame set is used.
+struct BagImage {
+  sensor_msgs::Image::ConstPtr raw;
+  sensor_msgs::CompressedImage::ConstPtr compressed;
+
+  /// The message as an image; nullopt for a message of another type.
+  static std::optional<BagImage> of(const rosbag::MessageInstance& m);
+  const std_msgs::Header& header() const { return raw ? raw->header : compressed->header; }
+  /// Raw images decoded as the depth nodelet decodes them (ros/conversions.h,
+  /// ImageTarget::kSweep), compressed ones to 8-bit grey. Throws
+  /// std::runtime_error naming `source` for an image that does not decode.
+  cv::Mat sweepImage(const std::string& source) const;
+  /// 8-bit grey (mono8).
+  cv::Mat greyImage(const std::string& source) const;
+};
+
+/// The bag's topic for each camera image topic: the topic itself, or
+/// `<topic>/compressed` (image_transport's name) when the bag has only that.
+std::vector<std::string> imageTopicsInBag(rosbag::Bag& bag, std::vector<std::string> topics);
 
 }  // namespace fisheye_mapping
 

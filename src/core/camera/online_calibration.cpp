@@ -103,6 +103,10 @@ const ParamTable<SelfCalibrationConfig>& SelfCalibrationConfig::params() {
                 "camera)")
         .number("self_calibration_features", [](C& c) -> int& { return c.max_features; }, R::between(10, 100000),
                 "keypoints", "ORB keypoints per image for the self-calibration")
+        .flag("self_calibration_first_set", [](C& c) -> bool& { return c.first_set; },
+              "A camera never corrected takes a fit of the first frame set alone (held out on halves of its "
+              "matches) in full when it exceeds self_calibration_change_deg, so depth is corrected from the first "
+              "frame set; false: fits need two frame sets")
         .text("self_calibration_start", [](C& c) -> std::string& { return c.start_file; },
               "Camchain saved by save_calibration to start from (empty: the calibration as given)");
     return t;
@@ -305,8 +309,15 @@ void OnlineRigCalibrator::update(const std::vector<cv::Mat>& grey) {
     s.warn = false;
     // One frame set alone cannot tell its scene's bias (near points and the
     // calibrated translation's error) from the camera's error: a fit is
-    // applied only once the pool holds two sets (held out against each other).
-    if (fit.status == CameraRefinement::Status::kApplied && pool.size() < 2 && config_.window >= 2) {
+    // applied only once the pool holds two sets (held out against each other)
+    // - except the first correction of a camera (first_set), in full, when
+    // the set alone wants more than change_deg (what one set is trusted to
+    // tell from its scene's bias, as for a knock): a one-set fit is then far
+    // closer than the calibration as given, and nothing was swept with that
+    // yet. Smaller errors, and everything after, go through the pool.
+    const bool first = config_.first_set && s.updates == 0 && !started_from_file_ && pool.size() == 1 &&
+                       fit.status == CameraRefinement::Status::kApplied && fit.correction_deg > config_.change_deg;
+    if (fit.status == CameraRefinement::Status::kApplied && pool.size() < 2 && config_.window >= 2 && !first) {
       s.status = "warming up (one frame set of evidence; a fit is applied from two on)";
       continue;
     }
@@ -316,7 +327,8 @@ void OnlineRigCalibrator::update(const std::vector<cv::Mat>& grey) {
     }
     // 3. The total from the given calibration must stay within the maximum.
     const Eigen::Matrix3d R_given = relative(given_, c).linear();
-    const Eigen::Matrix3d step = expSo3(config_.gain * logSo3(T_cur.linear().transpose() * T_fit.linear()));
+    const double gain = first ? 1.0 : config_.gain;
+    const Eigen::Matrix3d step = expSo3(gain * logSo3(T_cur.linear().transpose() * T_fit.linear()));
     const Eigen::Matrix3d R_next = T_cur.linear() * step;
     const double total_fit_deg = angleOf(R_given.transpose() * T_fit.linear()) / kDeg;
     if (total_fit_deg > config_.max_correction_deg) {
@@ -326,10 +338,11 @@ void OnlineRigCalibrator::update(const std::vector<cv::Mat>& grey) {
                  "self_calibration_max_correction_deg " + fixed(config_.max_correction_deg, 3) + " deg)";
       continue;
     }
-    // 4. Smoothly.
+    // 4. Smoothly (the first set's fit in full).
     applyRotation(c, R_next);
     ++s.updates;
-    s.status = "correcting (fit " + fixed(fit.correction_deg, 3) + " deg, residual " + fixed(fit.rms_before_deg, 3) +
+    s.status = std::string(first ? "first correction, from one frame set" : "correcting") + " (fit " +
+               fixed(fit.correction_deg, 3) + " deg, residual " + fixed(fit.rms_before_deg, 3) +
                " -> " + fixed(fit.rms_after_deg, 3) + " deg, held out " + fixed(fit.heldout_before_deg, 4) + " -> " +
                fixed(fit.heldout_after_deg, 4) + " deg)";
   }
@@ -371,6 +384,7 @@ void OnlineRigCalibrator::startFrom(const std::string& camchain_path) {
     next = withRelativePose(next, ref_, c, T);
   }
   rig_ = next;
+  started_from_file_ = true;
   for (int c : supports_) {
     const Eigen::Matrix3d total = relative(given_, c).linear().transpose() * relative(rig_, c).linear();
     state_[c].correction_rotvec_deg = logSo3(total) / kDeg;

@@ -17,7 +17,16 @@
 //     passes the held-out test (halves of whole frame sets, each half's fit
 //     scored on the other half against the current rotation's score there:
 //     no bias toward the current calibration, nor toward one scene) and is
-//     significant;
+//     significant. The one exception (`first_set`): a camera never corrected
+//     yet takes a fit of the first frame set alone that passes the held-out
+//     test on halves of that set's matches (alternate matches), is
+//     significant and exceeds `change_deg` (what one set is trusted to tell
+//     from its scene's bias), in full: nothing was swept with the calibration as given
+//     yet, and a one-set fit (within about 0.1 deg of the truth on
+//     realistic rigs) is far closer than a rig a fraction of a degree off,
+//     so depth is corrected from the first frame set on (a single frame set,
+//     as plane_sweep_depth gets, included); the pool refines it from the
+//     second set on;
 //  3. a correction whose total from the given calibration exceeds
 //     `max_correction_deg` is refused and reported, never applied;
 //  4. applied smoothly: the current rotation moves a fraction `gain` of the
@@ -55,6 +64,7 @@ struct SelfCalibrationConfig {
   double gain = 0.6;                 // self_calibration_gain: fraction of a fit applied per update
   double change_deg = 0.15;          // self_calibration_change_deg: the newest set alone needing more restarts the pool
   int max_features = 3000;           // self_calibration_features: ORB keypoints per image
+  bool first_set = true;             // self_calibration_first_set: correct from the first frame set on
   std::string start_file;            // self_calibration_start: a camchain saved by a previous run
   // Throws std::invalid_argument naming the parameter.
   void validate() const;
@@ -149,6 +159,7 @@ class OnlineRigCalibrator {
   std::vector<cv::Mat> last_thumbs_;                           // per camera, at the last update
   std::vector<bool> has_far_;                 // per camera: the last update's newest set alone was far off
   std::vector<Eigen::Matrix3d> far_target_;   // ... and where it wanted R_ref_cam
+  bool started_from_file_ = false;            // self_calibration_start was used
   std::vector<CameraCalibrationState> state_;
   std::string note_;
   int frame_sets_ = 0, updates_ = 0;
