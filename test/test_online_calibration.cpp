@@ -68,6 +68,7 @@ void printErrors(const char* what, int k, const fm::Rig& truth, const fm::Online
 fm::SelfCalibrationConfig everySet() {
   fm::SelfCalibrationConfig c;
   c.period = 1;  // the test gives only the sampled sets
+  c.period_steady = 1;
   return c;
 }
 
@@ -203,6 +204,45 @@ TEST_F(OnlineCalibrationTest, FollowsACameraKnockedMidDrive) {
   for (int c : {1, 3, 4}) EXPECT_LT(angleDeg(relRotation(*truth_, 0, c), relRotation(cal.rig(), 0, c)), 0.03);
 }
 
+// Once every camera is steady the updates come every period_steady sets
+// (less work per frame set); a camera whose newest set alone is far off
+// brings the next update at once, and the knock is followed as fast as at
+// the short period. Here the sets are a second apart: period 1 (every
+// set), period_steady 3.
+TEST_F(OnlineCalibrationTest, SteadyCamerasAreUpdatedLessOftenAKnockAtOnce) {
+  fm::SelfCalibrationConfig cfg = everySet();
+  cfg.period_steady = 3;
+  fm::OnlineRigCalibrator cal(*truth_, 0, {1, 2, 3, 4}, {}, cfg);
+  std::vector<int> intervals;
+  for (int k = 0; k < 8; ++k) {
+    cal.observe((*sets_)[k]);
+    intervals.push_back(cal.interval());
+  }
+  // Updates at sets 0, 1 (the second), then every interval: the exact rig is
+  // steady from the second set's pooled fit on.
+  EXPECT_EQ(intervals[1], 3);
+  EXPECT_EQ(cal.updates(), 4) << "updates at sets 0, 1, 4, 7";
+  EXPECT_LT(maxError(*truth_, cal.rig()), 0.03);
+  // A 0.5 deg knock: the first update after it finds cam2's newest set far
+  // off and comes back the next set; within 0.1 deg three updates after it.
+  const fm::Rig knocked = perturbed(*truth_, 2, Eigen::Vector3d(1, 1, 0), 0.5);
+  int updates_before = cal.updates(), k = 0;
+  for (; cal.updates() == updates_before; ++k) cal.observe(render(knocked, 10.0 + k));
+  EXPECT_LE(k, 3);
+  EXPECT_EQ(cal.interval(), 1);
+  updates_before = cal.updates();
+  for (int n = 0; cal.updates() < updates_before + 2 && n < 10; ++n, ++k) cal.observe(render(knocked, 10.0 + k));
+  printErrors("steady knock", k, knocked, cal);
+  EXPECT_LT(angleDeg(relRotation(knocked, 0, 2), relRotation(cal.rig(), 0, 2)), 0.1);
+  EXPECT_LE(k, 6);
+  EXPECT_NE(cal.interval(), cfg.period_steady);  // not steady again yet: its last fit was large
+  for (int c : {1, 3, 4}) EXPECT_LT(angleDeg(relRotation(*truth_, 0, c), relRotation(cal.rig(), 0, c)), 0.03);
+  // period_steady below period is refused.
+  fm::SelfCalibrationConfig bad_cfg;
+  bad_cfg.period_steady = bad_cfg.period - 1;
+  EXPECT_THROW(bad_cfg.validate(), std::invalid_argument);
+}
+
 TEST_F(OnlineCalibrationTest, AStaticCarBringsNoNewEvidence) {
   fm::OnlineRigCalibrator cal(bad(0.5), 0, {1, 2, 3, 4}, {}, everySet());
   cal.observe((*sets_)[0]);
@@ -326,18 +366,28 @@ TEST_F(OnlineCalibrationTest, TheDepthStageRunsItByDefault) {
   fm::DepthStageConfig cfg;
   EXPECT_TRUE(cfg.self_calibration.enabled);
   cfg.self_calibration.period = 2;
+  cfg.self_calibration.period_steady = 2;
   cfg.sweep.resolution = fm::SweepResolution::Half;
   fm::DepthStage stage(bad(0.3), cfg);
   ASSERT_NE(stage.selfCalibration(), nullptr);
+  int updated_sets = 0, next = 0;
   for (int k = 0; k < 6; ++k) {
+    const int before = stage.selfCalibration()->updates();
     const fm::DepthResult r = stage.compute((*sets_)[k]);
-    if (k % 2 == 0 || k == 1) {  // every period-th set and the second
+    const bool updated = stage.selfCalibration()->updates() > before;
+    // The first two sets, then every interval() sets (period 2 here; 1 while a
+    // camera's newest set alone is far off).
+    EXPECT_EQ(updated, k <= 1 || k == next) << k;
+    if (updated) next = k + stage.selfCalibration()->interval();
+    updated_sets += updated;
+    if (updated) {
       EXPECT_GT(r.calibration_ms, 0.0) << k;
       EXPECT_GE(r.total_ms, r.calibration_ms + r.sweep_ms);
     } else {
       EXPECT_EQ(r.calibration_ms, 0.0) << k;
     }
   }
+  EXPECT_LT(updated_sets, 6);
   EXPECT_LT(maxError(*truth_, stage.rig()), 0.1);
   EXPECT_LT(maxError(stage.selfCalibration()->rig(), stage.rig()), 1e-12);
   fm::DepthStageConfig off;

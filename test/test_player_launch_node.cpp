@@ -206,17 +206,15 @@ TEST_F(PlayerLaunch, CameraInfoFromThePlayerGivesTheRigAndTheHeldPoseNeverRepeat
   ASSERT_TRUE(played) << "the player wrote no summary within 150 s: " << launch << "\n" << out;
   const std::string yaml = readFile(summary);
   // Every frame set through the pipeline (none timed out: the player's
-  // CameraInfo before the drive gave the sync its rig in time). The TSDF
-  // stage may skip the first depth frame: its CameraInfo (depth_masked/
-  // camera_info, republished by the mask stage) can arrive after it.
+  // CameraInfo before the drive gave the sync its rig in time), every one
+  // fused: a depth frame whose CameraInfo (depth_masked/camera_info,
+  // republished by the mask stage) comes after it waits for it.
   EXPECT_NE(yaml.find("played: 10\n"), std::string::npos) << yaml;
   EXPECT_NE(yaml.find("timed_out: 0\n"), std::string::npos) << yaml << out;
   const int fused = summaryValue(yaml, "fused"), skipped = summaryValue(yaml, "skipped");
-  EXPECT_GE(fused, 9) << yaml << out;
-  EXPECT_EQ(fused + skipped, 10) << yaml;
-  if (skipped > 0) {
-    EXPECT_NE(out.find("not fused: no camera_info for frame 'cam0_optical_frame' yet"), std::string::npos) << out;
-  }
+  EXPECT_EQ(fused, 10) << yaml << out;
+  EXPECT_EQ(skipped, 0) << yaml;
+  EXPECT_EQ(out.find("no camera_info for frame"), std::string::npos) << out;
   // Holding (clock and last pose): 4 s, 8 held poses; the launch keeps running.
   ros::WallDuration(4.0).sleep();
   EXPECT_LT(waitExit(pid, 0.1), 0) << "the launch ended after a drive played to its end";

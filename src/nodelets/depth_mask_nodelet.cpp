@@ -59,6 +59,7 @@
 #include <atomic>
 #include <memory>
 #include <mutex>
+#include <optional>
 
 #include <boost/thread/recursive_mutex.hpp>
 #include <dynamic_reconfigure/server.h>
@@ -121,8 +122,10 @@ class DepthMaskNodelet : public nodelet::Nodelet {
     monitor_->setExtraReport([this](diagnostic_updater::DiagnosticStatusWrapper& stat) { report(stat); });
     // image_transport's convention: the CameraInfo next to the (resolved, remapped) image topic.
     info_in_topic_ = image_transport::getCameraInfoTopic(nh.resolveName("depth/image"));
+    // Latched: a subscriber that connects after a depth map went out (the
+    // TSDF stage holds that depth until its CameraInfo comes) still gets it.
     info_pub_ = nh.advertise<sensor_msgs::CameraInfo>(
-        image_transport::getCameraInfoTopic(nh.resolveName("depth_masked/image")), 5);
+        image_transport::getCameraInfoTopic(nh.resolveName("depth_masked/image")), 5, true);
     timer_ = nh.createWallTimer(ros::WallDuration(timerPeriod(cfg_.wait_for_detections)),
                                 [this](const ros::WallTimerEvent&) { onTimer(); });
     reconfigure_ = std::make_unique<dynamic_reconfigure::Server<ReconfigureConfig>>(reconfigure_mutex_, pnh);
@@ -275,6 +278,14 @@ class DepthMaskNodelet : public nodelet::Nodelet {
   void onCameraInfo(const sensor_msgs::CameraInfoConstPtr& msg) {
     std::lock_guard<std::mutex> lock(info_mutex_);
     info_ = msg;
+    // A masked depth went out before any CameraInfo had come (the depth
+    // stage publishes both; they race): its CameraInfo now, so that a
+    // consumer waiting for it (the TSDF stage) need not wait for the next.
+    if (unmatched_depth_) {
+      sensor_msgs::Image depth = *unmatched_depth_;
+      unmatched_depth_.reset();
+      publishCameraInfoLocked(depth);
+    }
   }
 
   void onTimer() {
@@ -316,11 +327,20 @@ class DepthMaskNodelet : public nodelet::Nodelet {
   // depth map; never waited for.
   void publishCameraInfo(const sensor_msgs::Image& depth) {
     std::lock_guard<std::mutex> lock(info_mutex_);
+    publishCameraInfoLocked(depth);
+  }
+  void publishCameraInfoLocked(const sensor_msgs::Image& depth) {
     if (!info_) {
       if (!told_no_info_)
         NODELET_INFO("no CameraInfo on %s (yet): depth_masked/camera_info is published once one arrives",
                      info_in_topic_.c_str());
       told_no_info_ = true;
+      // Its header and size (not its pixels), for the CameraInfo when it comes.
+      sensor_msgs::Image header_only;
+      header_only.header = depth.header;
+      header_only.width = depth.width;
+      header_only.height = depth.height;
+      unmatched_depth_ = header_only;
       return;
     }
     if (info_->width != depth.width || info_->height != depth.height) {
@@ -506,6 +526,7 @@ class DepthMaskNodelet : public nodelet::Nodelet {
   sensor_msgs::CameraInfoConstPtr info_;
   std::string info_problem_;
   bool told_no_info_ = false;
+  std::optional<sensor_msgs::Image> unmatched_depth_;  // the last masked depth out before any CameraInfo (info_mutex_)
   std::unique_ptr<image_transport::ImageTransport> it_;
   image_transport::Subscriber depth_sub_;
   ros::Subscriber det_sub_, info_sub_;

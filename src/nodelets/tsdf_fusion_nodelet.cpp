@@ -5,7 +5,9 @@
 //             through a tf2 MessageFilter, so a frame waits for its pose.
 //             With ~rig_source camera_info: depth_masked/camera_info, the
 //             camera model of each depth image (the latest CameraInfo of its
-//             frame_id; a frame before one is dropped, "no camera_info yet").
+//             frame_id; frames that come before their first CameraInfo wait
+//             for it, the last kMaxHeld of them for at most kMaxHoldS: others
+//             are dropped, "no camera_info yet").
 //             ~rig_source camchain (default): the model from ~camchain/~mount.
 //             image (sensor_msgs/Image, the reference camera; vehicle.launch
 //             remaps it; ~intensity false: not subscribed): its grey at the
@@ -169,6 +171,20 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_, nh);
     if (rig_source_ == "camera_info") {
       info_sub_ = nh.subscribe("depth_masked/camera_info", 10, &TsdfFusionNodelet::onCameraInfo, this);
+      // Frames held for their CameraInfo longer than kMaxHoldS are dropped
+      // (and acknowledged: a paced player waits for them).
+      hold_timer_ = nh.createWallTimer(ros::WallDuration(0.25), [this](const ros::WallTimerEvent&) {
+        std::vector<sensor_msgs::ImageConstPtr> expired;
+        {
+          std::lock_guard<std::mutex> lock(info_mutex_);
+          const ros::WallTime now = ros::WallTime::now();
+          while (!held_.empty() && (now - held_.front().second).toSec() > kMaxHoldS) {
+            expired.push_back(held_.front().first);
+            held_.pop_front();
+          }
+        }
+        for (const auto& m : expired) processDepth(m);  // no model yet: dropped, "no camera_info yet"
+      });
     }
     vehicles_sub_ = nh.subscribe("depth_masked/vehicles", 5, &TsdfFusionNodelet::onVehicles, this);
     if (opts_.intensity) {
@@ -399,7 +415,27 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     done_pub_.publish(msg);
   }
 
+  // ~rig_source camera_info: a depth frame that comes before the first
+  // CameraInfo of its frame (the other stage publishes both; they race)
+  // waits for it (onCameraInfo fuses it); at most kMaxHeld wait, an older
+  // one is dropped ("no camera_info yet") and acknowledged.
+  static constexpr size_t kMaxHeld = 8;
+  static constexpr double kMaxHoldS = 2.0;  // wall time a frame waits at most
   void onDepth(const sensor_msgs::ImageConstPtr& msg) {
+    sensor_msgs::ImageConstPtr overflow;
+    if (rig_source_ == "camera_info") {
+      std::lock_guard<std::mutex> lock(info_mutex_);
+      if (!models_.count(msg->header.frame_id)) {
+        held_.emplace_back(msg, ros::WallTime::now());
+        if (held_.size() <= kMaxHeld) return;
+        overflow = held_.front().first;
+        held_.pop_front();
+      }
+    }
+    processDepth(overflow ? overflow : msg);
+  }
+
+  void processDepth(const sensor_msgs::ImageConstPtr& msg) {
     std::string skipped = "not fused";
     struct Ack {  // every path out of here acknowledges the frame
       TsdfFusionNodelet* self;
@@ -585,18 +621,30 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
   // again only when the calibration changes; a bad one is logged and counted,
   // and that frame's depth is dropped until a good one arrives.
   void onCameraInfo(const sensor_msgs::CameraInfoConstPtr& msg) {
-    std::lock_guard<std::mutex> lock(info_mutex_);
-    const auto it = models_.find(msg->header.frame_id);
-    if (it != models_.end() && sameCalibration(it->second.info, *msg)) return;
-    try {
-      models_[msg->header.frame_id] = {*msg, std::make_shared<const CameraModel>(fromCameraInfo(*msg))};
-      NODELET_INFO("camera model of frame '%s' from its CameraInfo (%s, %ux%u)", msg->header.frame_id.c_str(),
-                   msg->distortion_model.c_str(), msg->width, msg->height);
-    } catch (const std::exception& e) {
-      models_.erase(msg->header.frame_id);
-      monitor_->error(std::string("camera_info: ") + e.what());
-      NODELET_ERROR_THROTTLE(5.0, "camera_info rejected: %s", e.what());
+    std::vector<sensor_msgs::ImageConstPtr> ready;  // held depth frames of this camera, fused below
+    {
+      std::lock_guard<std::mutex> lock(info_mutex_);
+      const auto it = models_.find(msg->header.frame_id);
+      if (it != models_.end() && sameCalibration(it->second.info, *msg)) return;
+      try {
+        models_[msg->header.frame_id] = {*msg, std::make_shared<const CameraModel>(fromCameraInfo(*msg))};
+        NODELET_INFO("camera model of frame '%s' from its CameraInfo (%s, %ux%u)", msg->header.frame_id.c_str(),
+                     msg->distortion_model.c_str(), msg->width, msg->height);
+        for (auto h = held_.begin(); h != held_.end();) {
+          if (h->first->header.frame_id != msg->header.frame_id) {
+            ++h;
+            continue;
+          }
+          ready.push_back(h->first);
+          h = held_.erase(h);
+        }
+      } catch (const std::exception& e) {
+        models_.erase(msg->header.frame_id);
+        monitor_->error(std::string("camera_info: ") + e.what());
+        NODELET_ERROR_THROTTLE(5.0, "camera_info rejected: %s", e.what());
+      }
     }
+    for (const auto& m : ready) processDepth(m);
   }
 
   // Every publish_period: the mesh blocks that changed, and the cloud.
@@ -745,6 +793,9 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
   };
   std::mutex info_mutex_;
   std::map<std::string, InfoModel> models_;
+  // Depth frames waiting for their first CameraInfo, with when they came (info_mutex_).
+  std::deque<std::pair<sensor_msgs::ImageConstPtr, ros::WallTime>> held_;
+  ros::WallTimer hold_timer_;
   ros::Subscriber info_sub_;
   std::unique_ptr<TsdfMap> map_;
   std::unique_ptr<TsdfMesher> mesher_;

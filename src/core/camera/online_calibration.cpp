@@ -89,6 +89,10 @@ const ParamTable<SelfCalibrationConfig>& SelfCalibrationConfig::params() {
            "self-calibration from feature matches)")
         .number("self_calibration_period", [](C& c) -> int& { return c.period; }, R::between(1, 10000), "frame sets",
                 "Frame sets from one self-calibration update to the next")
+        .number("self_calibration_period_steady", [](C& c) -> int& { return c.period_steady; },
+                R::between(1, 10000), "frame sets",
+                "Frame sets from one update to the next once every camera is steady (last fit below a third of "
+                "self_calibration_change_deg); at least self_calibration_period")
         .number("self_calibration_window", [](C& c) -> int& { return c.window; }, R::between(1, 100), "frame sets",
                 "Sampled frame sets whose matches are pooled in a fit")
         .number("self_calibration_max_correction_deg", [](C& c) -> double& { return c.max_correction_deg; },
@@ -109,6 +113,11 @@ const ParamTable<SelfCalibrationConfig>& SelfCalibrationConfig::params() {
               "frame set; false: fits need two frame sets")
         .text("self_calibration_start", [](C& c) -> std::string& { return c.start_file; },
               "Camchain saved by save_calibration to start from (empty: the calibration as given)");
+    t.rule([](const C& c) {
+      if (c.period_steady < c.period)
+        throw std::invalid_argument("self_calibration_period_steady: " + std::to_string(c.period_steady) +
+                                    " is below self_calibration_period " + std::to_string(c.period));
+    });
     return t;
   }();
   return t;
@@ -187,9 +196,12 @@ bool OnlineRigCalibrator::observe(const std::vector<cv::Mat>& images) {
   if (images.size() != given_.cameras.size())
     throw std::invalid_argument("frame set has " + std::to_string(images.size()) + " images for a rig of " +
                                 std::to_string(given_.cameras.size()) + " cameras");
-  // Every period-th set, and the second one too: a fit needs two frame sets,
-  // the first correction then comes one set after the start, not a period.
-  const bool due = frame_sets_ % config_.period == 0 || frame_sets_ == 1;
+  // The first set, the second one too (a pooled fit needs two frame sets:
+  // the first pooled correction then comes one set after the start, not a
+  // period), then every interval() sets.
+  const int index = frame_sets_;
+  const bool scheduled = index >= next_due_;
+  const bool due = scheduled || index == 1;
   ++frame_sets_;
   last_call_ms_ = 0.0;
   if (!config_.enabled || !due || images[ref_].empty()) return false;
@@ -198,6 +210,21 @@ bool OnlineRigCalibrator::observe(const std::vector<cv::Mat>& images) {
   for (size_t c = 0; c < images.size(); ++c) grey[c] = toGrey8(images[c]);
   const Rig before = rig_;
   update(grey);
+  // The next update: a period on, the steady period once every camera that
+  // could be matched is steady, the next set when one camera's newest set
+  // alone was far off (a knock is confirmed at once). The forced second
+  // update keeps the schedule unless it was due anyway or found a camera far off.
+  bool any_far = false, all_steady = true;
+  int matched = 0;
+  for (int c : supports_) {
+    any_far = any_far || has_far_[c];
+    if (state_[c].warn) continue;
+    ++matched;
+    all_steady = all_steady && pools_[c].size() >= 2 && !has_far_[c] &&
+                 state_[c].last_fit_deg < config_.change_deg / 3;
+  }
+  interval_ = any_far ? 1 : matched > 0 && all_steady ? config_.period_steady : config_.period;
+  if (scheduled || any_far) next_due_ = index + interval_;
   last_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   total_ms_ += last_ms_;
   last_call_ms_ = last_ms_;

@@ -2,9 +2,12 @@
 // rotation relative to the reference camera right while driving, from the
 // frame sets the depth stage sweeps anyway. No ROS.
 //
-// Every `period`-th frame set (and the second one), the rig's matcher (RigMatcher, the first half of
-// refine_rig) gathers feature matches between the reference and each support
-// camera; a match is a pair of bearings in the cameras' own frames, so it stays
+// Every `period`-th frame set (and the second one; every `period_steady`-th
+// once every camera is steady: past its warm-up, its last fit below a third
+// of `change_deg`, the newest set alone not far off; the next set when the
+// newest set alone is far off, to confirm a knock at once), the rig's matcher
+// (RigMatcher, the first half of refine_rig) gathers feature matches between
+// the reference and each support camera; a match is a pair of bearings in the cameras' own frames, so it stays
 // valid whatever rotation is applied later. Per camera:
 //  1. the newest frame set's matches are fitted alone (estimateCameraCorrection:
 //     RANSAC, Huber Gauss-Newton, held-out acceptance). When that fit needs
@@ -58,6 +61,7 @@ class ParamTable;
 struct SelfCalibrationConfig {
   bool enabled = true;               // self_calibration
   int period = 5;                    // self_calibration_period: frame sets from one update to the next
+  int period_steady = 8;             // self_calibration_period_steady: ... once every camera is steady
   int window = 4;                    // self_calibration_window: sampled frame sets whose matches are pooled
   double max_correction_deg = 2.0;   // self_calibration_max_correction_deg: from the given calibration
   int min_inliers = 150;             // self_calibration_min_inliers: minimum evidence of a fit
@@ -115,6 +119,9 @@ class OnlineRigCalibrator {
   const std::string& lastNote() const { return note_; }
   int frameSets() const { return frame_sets_; }
   int updates() const { return updates_; }
+  // Frame sets from the last update to the next one: period, period_steady
+  // (every camera steady) or 1 (a camera's newest set far off).
+  int interval() const { return interval_; }
   double lastUpdateMs() const { return last_ms_; }
   // Of which finding the matches (the rest: the fits).
   double lastMatchMs() const { return last_match_ms_; }
@@ -163,6 +170,8 @@ class OnlineRigCalibrator {
   std::vector<CameraCalibrationState> state_;
   std::string note_;
   int frame_sets_ = 0, updates_ = 0;
+  int next_due_ = 0;  // the frame set of the next update (besides the second set)
+  int interval_ = 0;
   double last_ms_ = 0.0, total_ms_ = 0.0, last_call_ms_ = 0.0, last_match_ms_ = 0.0;
   std::string start_error_;
   bool changed_ = false;
