@@ -231,7 +231,7 @@ int main(int argc, char** argv) {
                                         std::size_t(sync_cfg.queue_size), sync_cfg.time_reset_threshold);
     size_t seen = 0, done = 0, undecodable = 0;
     bool stopped = false;
-    std::set<std::string> not_images;
+    std::set<std::string> not_images, told;
     const auto t0 = std::chrono::steady_clock::now();
     for (const rosbag::MessageInstance& m : view) {
       ++seen;
@@ -253,6 +253,11 @@ int main(int argc, char** argv) {
           continue;
         }
         const fm::DepthResult r = stage.compute(imgs);
+        // Each dropped view and warning once (they repeat from set to set).
+        for (const auto& d : r.dropped_views)
+          if (told.insert("dropped " + d).second) std::cerr << "\nplane_sweep_depth: dropped " << d << "\n";
+        for (const auto& w : r.warnings)
+          if (told.insert("warning: " + w).second) std::cerr << "\nplane_sweep_depth: warning: " << w << "\n";
         std::ostringstream name;
         name << out << "/depth_" << stamp.sec << "." << std::setw(9) << std::setfill('0') << stamp.nsec;
         fm::writeDepthTiff(name.str() + ".tiff", r.depth);
