@@ -63,6 +63,10 @@ cv::Mat thumbnail(const cv::Mat& grey) {
   return small;
 }
 constexpr double kStill = 0.6;
+// Search band (deg) around the current epipolar planes for a camera known to
+// be close: several times the residual of a steady camera, and above the
+// knocks the self-calibration follows within a period.
+constexpr double kCloseBandDeg = 1.0;
 
 double meanAbsDiff(const cv::Mat& a, const cv::Mat& b) {
   if (a.empty() || b.empty() || a.size() != b.size()) return INFINITY;
@@ -281,10 +285,22 @@ void OnlineRigCalibrator::update(const std::vector<cv::Mat>& grey) {
     last_thumbs_[c] = thumb;
     usable[c] = grey[c];
   }
+  // A camera whose last pooled fit found it close (past its warm-up, enough
+  // inliers, the fit below change_deg, its newest set alone not far off) is
+  // searched within kCloseBandDeg of the current epipolar planes, the others
+  // within the full band: a knock beyond it leaves the camera short of
+  // evidence, and the next update searches the full band again.
+  std::vector<double> band(n, 0.0);
+  for (int c : supports_) {
+    const CameraCalibrationState& s = state_[c];
+    if (pools_[c].size() >= 2 && !s.warn && s.inliers >= config_.min_inliers && !has_far_[c] &&
+        s.last_fit_deg < config_.change_deg)
+      band[c] = kCloseBandDeg;
+  }
   std::vector<std::vector<EpipolarMatch>> found;
   const auto t_match = std::chrono::steady_clock::now();
   try {
-    found = matcher_.match(rig_, ref_, usable);
+    found = matcher_.match(rig_, ref_, usable, nullptr, band);
     last_match_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_match).count();
   } catch (const std::exception& e) {
     for (int c : supports_) state_[c].warn = true, state_[c].status = std::string("matching failed: ") + e.what();

@@ -80,12 +80,62 @@ class EpipolarModel {
   int n_;
 };
 
+// log of a rotation (an so(3) vector).
+Eigen::Vector3d logSo3(const Eigen::Matrix3d& R) {
+  const Eigen::AngleAxisd aa(R);
+  return aa.angle() * aa.axis();
+}
+
+// The rotation-only residual and its derivative with respect to a rotation
+// delta applied on the camera's side, R -> R exp(delta):
+//   g = R f_cam, e = (f_ref x t) . g, s = sqrt((|t x f_ref|^2 + |t x g|^2) / 2),
+//   r = e / s; dr/dg = n / s + e (t . g) t / (2 s^3) (n = f_ref x t; |g| = 1
+//   under rotations), dg/d(delta) = -R [f_cam]x, so dr/d(delta) =
+//   f_cam x (R^T dr/dg).
+double residualAndJacobian(const Eigen::Matrix3d& R, const Eigen::Vector3d& t, const Match& m, Eigen::Vector3d* J) {
+  const Eigen::Vector3d g = R * m.f_cam;
+  const Eigen::Vector3d n = m.f_ref.cross(t);
+  const double e = n.dot(g);
+  const double tg = t.dot(g);
+  const double s2 = 0.5 * (t.cross(m.f_ref).squaredNorm() + t.cross(g).squaredNorm());
+  const double s = std::sqrt(s2);
+  const Eigen::Vector3d dr_dg = n / s + (e * tg / (2 * s2 * s)) * t;
+  *J = m.f_cam.cross(R.transpose() * dr_dg);
+  return e / s;
+}
+
 // Gauss-Newton from x over the matches idx with Huber scale `huber` (radians;
-// <= 0: plain least squares). Numeric Jacobians (central differences). False
-// when the normal equations are singular.
+// <= 0: plain least squares). Rotation only: analytic Jacobians of a delta
+// on the camera's side, composed into x (R0 exp(x) exp(delta)); with the
+// translation direction: numeric Jacobians (central differences). False when
+// the normal equations are singular.
 bool gaussNewton(const EpipolarModel& model, const std::vector<Match>& matches, const std::vector<int>& idx,
                  double huber, int iterations, Eigen::VectorXd* x) {
   const int n = model.params();
+  if (n == 3) {
+    for (int it = 0; it < iterations; ++it) {
+      Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
+      Eigen::Vector3d b = Eigen::Vector3d::Zero();
+      const Eigen::Matrix3d R = model.rotation(*x);
+      const Eigen::Vector3d t = model.direction(*x);
+      Eigen::Vector3d J;
+      for (int i : idx) {
+        const Match& m = matches[i];
+        const double r = residualAndJacobian(R, t, m, &J);
+        const double rw = r * std::sqrt(m.weight);
+        const double w = m.weight * ((huber <= 0 || std::abs(rw) <= huber) ? 1.0 : huber / std::abs(rw));
+        H.noalias() += w * J * J.transpose();
+        b.noalias() += w * J * r;
+      }
+      Eigen::LDLT<Eigen::Matrix3d> ldlt(H);
+      if (ldlt.info() != Eigen::Success || !(H.diagonal().minCoeff() > 0)) return false;
+      const Eigen::Vector3d delta = -ldlt.solve(b);
+      if (!delta.allFinite()) return false;
+      *x = logSo3(expSo3(x->head<3>()) * expSo3(delta));
+      if (delta.norm() < 1e-9) break;  // radians: far below any residual
+    }
+    return x->allFinite();
+  }
   const double h = 1e-6;
   for (int it = 0; it < iterations; ++it) {
     Eigen::MatrixXd H = Eigen::MatrixXd::Zero(n, n);
@@ -443,7 +493,8 @@ const RigMatcher::Warp& RigMatcher::warpFor(const Rig& rig, int reference, int c
 }
 
 std::vector<std::vector<EpipolarMatch>> RigMatcher::match(const Rig& rig, int reference,
-                                                          const std::vector<cv::Mat>& set, std::vector<int>* raw) {
+                                                          const std::vector<cv::Mat>& set, std::vector<int>* raw,
+                                                          const std::vector<double>& band_deg) {
   const int n_cams = int(rig.cameras.size());
   require(reference >= 0 && reference < n_cams, "reference",
           "camera index " + std::to_string(reference) + " is not in [0, " + std::to_string(n_cams) + ")");
@@ -530,8 +581,11 @@ std::vector<std::vector<EpipolarMatch>> RigMatcher::match(const Rig& rig, int re
     // Warped features are rays of the reference frame: R = I for the epipolar window.
     const Eigen::Matrix3d R_match =
         config_.warp_support ? Eigen::Matrix3d::Identity() : Eigen::Matrix3d(T_ref[c].linear());
-    const auto dm = matchGuided(feats[reference], feats[c], R_match, T_ref[c].translation().normalized(),
-                                config_.max_initial_residual_deg * kDeg, config_.ratio, config_.max_hamming);
+    const double band = int(band_deg.size()) > c && band_deg[c] > 0
+                            ? std::min(band_deg[c], config_.max_initial_residual_deg)
+                            : config_.max_initial_residual_deg;
+    const auto dm = matchGuided(feats[reference], feats[c], R_match, T_ref[c].translation().normalized(), band * kDeg,
+                                config_.ratio, config_.max_hamming);
     if (raw) (*raw)[c] = int(dm.size());
     std::vector<cv::Point2f> p_ref, p_cam;
     for (const auto& [i, j] : dm) {

@@ -152,10 +152,14 @@ class RigMatcher {
   // Matches of one frame set per rig camera (empty for the reference and for
   // cameras whose image is empty). images: CV_8UC1 of the calibrated sizes (a
   // support camera's may be empty: skipped). raw: mutual feature matches
-  // before subpixel refinement and masking, per camera. Throws
-  // std::invalid_argument naming the camera for a wrong image.
+  // before subpixel refinement and masking, per camera. band_deg: none, or
+  // per camera the half-width of the search band around the current
+  // epipolar planes (0: max_initial_residual_deg), narrower for a camera
+  // known to be close (less work). Throws std::invalid_argument naming the
+  // camera for a wrong image.
   std::vector<std::vector<EpipolarMatch>> match(const Rig& rig, int reference, const std::vector<cv::Mat>& images,
-                                                std::vector<int>* raw = nullptr);
+                                                std::vector<int>* raw = nullptr,
+                                                const std::vector<double>& band_deg = {});
 
  private:
   struct Warp {
