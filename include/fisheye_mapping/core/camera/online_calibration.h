@@ -7,7 +7,9 @@
 // of `change_deg`, the newest set alone not far off; the next set when the
 // newest set alone is far off, to confirm a knock at once), the rig's matcher
 // (RigMatcher, the first half of refine_rig) gathers feature matches between
-// the reference and each support camera; a match is a pair of bearings in the cameras' own frames, so it stays
+// the reference and each support camera (within 1 deg of the current
+// epipolar planes for a camera whose last pooled fit found it close, within
+// the full band otherwise); a match is a pair of bearings in the cameras' own frames, so it stays
 // valid whatever rotation is applied later. Per camera:
 //  1. the newest frame set's matches are fitted alone (estimateCameraCorrection:
 //     RANSAC, Huber Gauss-Newton, held-out acceptance). When that fit needs
