@@ -96,6 +96,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     autosave_timer_.stop();
     timer_.stop();
     occupancy_timer_.stop();
+    hold_timer_.stop();
     {
       std::lock_guard<std::mutex> lock(mutex_);
       if (map_ && session_) session_->shutdown(*map_);
@@ -174,6 +175,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
       // Frames held for their CameraInfo longer than kMaxHoldS are dropped
       // (and acknowledged: a paced player waits for them).
       hold_timer_ = nh.createWallTimer(ros::WallDuration(0.25), [this](const ros::WallTimerEvent&) {
+        std::lock_guard<std::mutex> order(order_mutex_);
         std::vector<sensor_msgs::ImageConstPtr> expired;
         {
           std::lock_guard<std::mutex> lock(info_mutex_);
@@ -182,6 +184,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
             expired.push_back(held_.front().first);
             held_.pop_front();
           }
+          takeReadyLocked(&expired);
         }
         for (const auto& m : expired) processDepth(m);  // no model yet: dropped, "no camera_info yet"
       });
@@ -421,18 +424,38 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
   // one is dropped ("no camera_info yet") and acknowledged.
   static constexpr size_t kMaxHeld = 8;
   static constexpr double kMaxHoldS = 2.0;  // wall time a frame waits at most
+  // Frames are fused in the order they came: a frame behind held ones waits
+  // with them, and order_mutex_ keeps a flush and a new frame from passing
+  // each other.
   void onDepth(const sensor_msgs::ImageConstPtr& msg) {
-    sensor_msgs::ImageConstPtr overflow;
+    std::lock_guard<std::mutex> order(order_mutex_);
+    std::vector<sensor_msgs::ImageConstPtr> ready;
     if (rig_source_ == "camera_info") {
       std::lock_guard<std::mutex> lock(info_mutex_);
-      if (!models_.count(msg->header.frame_id)) {
+      if (!models_.count(msg->header.frame_id) || !held_.empty()) {
         held_.emplace_back(msg, ros::WallTime::now());
-        if (held_.size() <= kMaxHeld) return;
-        overflow = held_.front().first;
-        held_.pop_front();
+        // The oldest beyond kMaxHeld goes on (fused if its model has come, else dropped).
+        while (held_.size() > kMaxHeld) {
+          ready.push_back(held_.front().first);
+          held_.pop_front();
+        }
+        takeReadyLocked(&ready);
+      } else {
+        ready.push_back(msg);
       }
+    } else {
+      ready.push_back(msg);
     }
-    processDepth(overflow ? overflow : msg);
+    for (const auto& m : ready) processDepth(m);
+  }
+
+  // Moves the held frames at the front whose camera model has come to *ready
+  // (info_mutex_ held).
+  void takeReadyLocked(std::vector<sensor_msgs::ImageConstPtr>* ready) {
+    while (!held_.empty() && models_.count(held_.front().first->header.frame_id)) {
+      ready->push_back(held_.front().first);
+      held_.pop_front();
+    }
   }
 
   void processDepth(const sensor_msgs::ImageConstPtr& msg) {
@@ -621,7 +644,8 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
   // again only when the calibration changes; a bad one is logged and counted,
   // and that frame's depth is dropped until a good one arrives.
   void onCameraInfo(const sensor_msgs::CameraInfoConstPtr& msg) {
-    std::vector<sensor_msgs::ImageConstPtr> ready;  // held depth frames of this camera, fused below
+    std::lock_guard<std::mutex> order(order_mutex_);
+    std::vector<sensor_msgs::ImageConstPtr> ready;  // held depth frames whose model has come, fused below
     {
       std::lock_guard<std::mutex> lock(info_mutex_);
       const auto it = models_.find(msg->header.frame_id);
@@ -630,14 +654,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
         models_[msg->header.frame_id] = {*msg, std::make_shared<const CameraModel>(fromCameraInfo(*msg))};
         NODELET_INFO("camera model of frame '%s' from its CameraInfo (%s, %ux%u)", msg->header.frame_id.c_str(),
                      msg->distortion_model.c_str(), msg->width, msg->height);
-        for (auto h = held_.begin(); h != held_.end();) {
-          if (h->first->header.frame_id != msg->header.frame_id) {
-            ++h;
-            continue;
-          }
-          ready.push_back(h->first);
-          h = held_.erase(h);
-        }
+        takeReadyLocked(&ready);
       } catch (const std::exception& e) {
         models_.erase(msg->header.frame_id);
         monitor_->error(std::string("camera_info: ") + e.what());
@@ -796,6 +813,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
   // Depth frames waiting for their first CameraInfo, with when they came (info_mutex_).
   std::deque<std::pair<sensor_msgs::ImageConstPtr, ros::WallTime>> held_;
   ros::WallTimer hold_timer_;
+  std::mutex order_mutex_;  // taken first: depth frames are fused one at a time, in the order they came
   ros::Subscriber info_sub_;
   std::unique_ptr<TsdfMap> map_;
   std::unique_ptr<TsdfMesher> mesher_;
