@@ -41,6 +41,7 @@ fm_add_test(test_tsdf SOURCES test/test_tsdf.cpp)
 fm_add_test(test_occupancy_grid SOURCES test/test_occupancy_grid.cpp)
 fm_add_test(test_tsdf_map_file SOURCES test/test_tsdf_map_file.cpp DEPENDS map_tool)
 fm_add_test(test_map_session SOURCES test/test_map_session.cpp)
+fm_add_test(test_tsdf_fusion_stage SOURCES test/test_tsdf_fusion_stage.cpp)
 fm_add_test(test_map_accuracy SOURCES test/test_map_accuracy.cpp DEPENDS map_accuracy)
 fm_add_test(test_tsdf_fusion_node ROSTEST test/launch/tsdf_fusion.test
   SOURCES test/test_tsdf_fusion_node.cpp DEPENDS fisheye_mapping_nodelets)

@@ -10,4 +10,5 @@ set(FM_TSDF_SOURCES
   tsdf_mesher.cpp
   map_session.cpp
   occupancy_grid.cpp
+  fusion_stage.cpp
 )

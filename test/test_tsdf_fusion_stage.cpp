@@ -1,0 +1,206 @@
+// The TSDF stage without ROS (TsdfFusionStage, what the TsdfFusion nodelet
+// runs) and the order-keeping wait of its depth frames (OrderedWait): checked
+// against hand-made sequences, an analytic wall and the files on disk.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "fisheye_mapping/core/common/ordered_wait.h"
+#include "fisheye_mapping/core/sim/analytic_scene.h"
+#include "fisheye_mapping/core/tsdf/fusion_stage.h"
+#include "test_utils.h"
+
+namespace fisheye_mapping {
+namespace {
+
+namespace fs = std::filesystem;
+constexpr std::int64_t kS = 1000000000;  // ns per s
+
+// ---------------------------------------------------------------- OrderedWait
+TEST(OrderedWait, KeepsTheOrderTheItemsCameIn) {
+  std::set<std::string> known;
+  auto is_known = [&](const std::string& k) { return known.count(k) > 0; };
+  OrderedWait<int> w(3, 2.0);
+  known.insert("a");
+  EXPECT_EQ(w.arrive(1, "a", 0.0, is_known), std::vector<int>({1}));  // nothing waits: goes on
+  EXPECT_TRUE(w.arrive(2, "b", 0.1, is_known).empty());               // b unknown: waits
+  EXPECT_TRUE(w.arrive(3, "a", 0.2, is_known).empty());               // behind 2: waits though a is known
+  EXPECT_EQ(w.size(), 2u);
+  known.insert("b");
+  EXPECT_EQ(w.release(is_known), std::vector<int>({2, 3}));
+  EXPECT_EQ(w.size(), 0u);
+}
+
+TEST(OrderedWait, TheOldestBeyondTheLimitAndTheExpiredGoOnUnknown) {
+  std::set<std::string> known;
+  auto is_known = [&](const std::string& k) { return known.count(k) > 0; };
+  OrderedWait<int> w(2, 2.0);
+  EXPECT_TRUE(w.arrive(1, "b", 0.0, is_known).empty());
+  EXPECT_TRUE(w.arrive(2, "b", 1.0, is_known).empty());
+  EXPECT_EQ(w.arrive(3, "b", 1.5, is_known), std::vector<int>({1}));  // three waiting, two allowed
+  EXPECT_TRUE(w.expire(2.9, is_known).empty());                       // 2 came at 1.0: waited 1.9 s
+  EXPECT_EQ(w.expire(3.1, is_known), std::vector<int>({2}));          // 2.1 s
+  known.insert("b");
+  EXPECT_EQ(w.expire(3.2, is_known), std::vector<int>({3}));  // not expired, but its key has come
+}
+
+// ------------------------------------------------------------- TsdfFusionStage
+TsdfConfig smallMap() {
+  TsdfConfig cfg;
+  cfg.voxel_size = 0.1;
+  cfg.local_map_size = Eigen::Vector3d(20, 20, 3);
+  cfg.min_observations = 1;
+  return cfg;
+}
+
+struct Wall {
+  CameraModel cam = CameraModel::unified(test::makeIntrinsics(130, 130, 127.5, 67.5, 256, 136), 0.98, 0, 0, 0, 0);
+  analytic::Scene scene;
+  Wall() { scene.boxes.push_back({Eigen::Vector3d(6, -10, 0), Eigen::Vector3d(7, 10, 4)}); }
+  // The camera 1.5 m up, looking at the wall; the vehicle below it.
+  Eigen::Isometry3d camera(int i) const {
+    return analytic::lookAt(Eigen::Vector3d(0.1 * i, 0, 1.5), Eigen::Vector3d(10, 0, 1.5));
+  }
+  Eigen::Isometry3d base(int i) const {
+    Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+    T.translation() = Eigen::Vector3d(0.1 * i, 0, 0.3);
+    return T;
+  }
+  TsdfFusionStage::Fused fuse(TsdfFusionStage& s, int i, std::int64_t stamp) const {
+    return s.fuse(scene.render(cam, camera(i)), cam, camera(i), base(i), stamp);
+  }
+};
+
+TsdfFusionStage::Log quiet() {
+  return [](bool, const std::string&) {};
+}
+
+TEST(TsdfFusionStage, TimeGoingBackIsAResetOrOutOfOrder) {
+  Wall wall;
+  TsdfStageOptions opts;
+  opts.time_reset_threshold = 1.0;
+  opts.clear_map_on_time_reset = true;
+  TsdfFusionStage s(smallMap(), opts, quiet());
+  EXPECT_EQ(s.admit(10 * kS).verdict, TsdfFusionStage::Verdict::kFuse);
+  wall.fuse(s, 0, 10 * kS);
+  EXPECT_EQ(s.admit(11 * kS).verdict, TsdfFusionStage::Verdict::kFuse);
+  wall.fuse(s, 1, 11 * kS);
+  EXPECT_EQ(s.lastStamp(), 11 * kS);
+  EXPECT_GT(s.map().numBlocks(), 0u);
+  s.updateMesh();
+  EXPECT_FALSE(s.takeMeshReset());
+  // 0.5 s back: within the threshold, out of order.
+  EXPECT_EQ(s.admit(10 * kS + kS / 2).verdict, TsdfFusionStage::Verdict::kOutOfOrder);
+  // 6 s back: a time reset; clear_map_on_time_reset empties the map and the mesh.
+  const TsdfFusionStage::Admission a = s.admit(5 * kS);
+  EXPECT_EQ(a.verdict, TsdfFusionStage::Verdict::kTimeReset);
+  EXPECT_FALSE(a.reason.empty());
+  EXPECT_EQ(s.map().numBlocks(), 0u);
+  EXPECT_EQ(s.lastStamp(), 0);
+  EXPECT_TRUE(s.takeMeshReset());
+  EXPECT_FALSE(s.takeMeshReset());  // once
+  EXPECT_TRUE(s.mesher().blocks().empty());
+  // The new time line goes on from there.
+  EXPECT_EQ(s.admit(5 * kS + kS / 10).verdict, TsdfFusionStage::Verdict::kFuse);
+}
+
+TEST(TsdfFusionStage, ATimeResetKeepsTheMapUnlessAsked) {
+  Wall wall;
+  TsdfFusionStage s(smallMap(), TsdfStageOptions(), quiet());
+  ASSERT_EQ(s.admit(10 * kS).verdict, TsdfFusionStage::Verdict::kFuse);  // what the nodelet does before fuse()
+  wall.fuse(s, 0, 10 * kS);
+  const size_t blocks = s.map().numBlocks();
+  std::string reason;
+  EXPECT_TRUE(s.checkTimeReset(2 * kS, &reason));
+  EXPECT_EQ(s.map().numBlocks(), blocks);
+  EXPECT_FALSE(s.takeMeshReset());
+}
+
+TEST(TsdfFusionStage, TheGreyImageOfTheStampColoursTheWall) {
+  Wall wall;
+  TsdfFusionStage s(smallMap(), TsdfStageOptions(), quiet());
+  // A grey image 2 ms off the depth's stamp is not its image.
+  s.addGrey(10 * kS + 2000000, cv::Mat(136, 256, CV_8UC1, cv::Scalar(90)));
+  EXPECT_FALSE(wall.fuse(s, 0, 10 * kS).with_intensity);
+  s.addGrey(11 * kS + 500000, cv::Mat(136, 256, CV_8UC1, cv::Scalar(200)));  // 0.5 ms off: its image
+  EXPECT_TRUE(wall.fuse(s, 0, 11 * kS).with_intensity);
+  // The wall's face (x = 6 m) straight ahead of the camera: the voxel just in
+  // front of it has the grey of the one image fused with it.
+  const Eigen::Vector3i v(59, 0, 15);  // centre (5.95, 0.05, 1.55)
+  EXPECT_EQ(s.map().grey(v), 200);
+  // A grey image of the wrong size: fused without, and said why.
+  s.addGrey(12 * kS, cv::Mat(68, 128, CV_8UC1, cv::Scalar(50)));
+  const TsdfFusionStage::Fused f = wall.fuse(s, 0, 12 * kS);
+  EXPECT_FALSE(f.with_intensity);
+  EXPECT_NE(f.intensity_note.find("128x68"), std::string::npos) << f.intensity_note;
+  EXPECT_EQ(s.map().grey(v), 200);
+}
+
+TEST(TsdfFusionStage, TheObstacleGridLiesAroundTheLastVehiclePose) {
+  Wall wall;
+  TsdfStageOptions opts;
+  opts.occupancy.size = 20.0;
+  opts.occupancy.resolution = 0.5;
+  TsdfFusionStage s(smallMap(), opts, quiet());
+  double z = -1;
+  EXPECT_FALSE(s.occupancy(&z).has_value());  // no pose yet
+  wall.fuse(s, 3, 10 * kS);
+  const std::optional<OccupancyGrid> grid = s.occupancy(&z);
+  ASSERT_TRUE(grid.has_value());
+  EXPECT_DOUBLE_EQ(z, 0.3);
+  EXPECT_EQ(grid->width, 40);
+  EXPECT_EQ(grid->height, 40);
+  // Centred on the vehicle at x = 0.3 m, snapped to whole cells.
+  EXPECT_NEAR(grid->origin.x() + 10.0, 0.3, 0.5);
+  EXPECT_NEAR(grid->origin.y() + 10.0, 0.0, 0.5);
+}
+
+TEST(TsdfFusionStage, RunTimeSettingsAreCheckedAndRemesh) {
+  Wall wall;
+  TsdfFusionStage s(smallMap(), TsdfStageOptions(), quiet());
+  for (int i = 0; i < 3; ++i) wall.fuse(s, i, (10 + i) * kS);
+  ASSERT_FALSE(s.updateMesh().empty());
+  TsdfConfig bad = s.config();
+  bad.max_range = -1;
+  EXPECT_THROW(s.reconfigure(bad), std::invalid_argument);
+  EXPECT_EQ(s.config().max_range, smallMap().max_range);
+  TsdfConfig next = s.config();
+  next.max_range = 30;
+  EXPECT_TRUE(s.reconfigure(next).empty());  // a range applies to later frames: no re-mesh
+  EXPECT_EQ(s.map().config().max_range, 30);
+  next.min_observations = 100;  // more than any voxel has: the mesh empties
+  EXPECT_FALSE(s.reconfigure(next).empty());
+  EXPECT_TRUE(s.takeCloudStale());
+  EXPECT_EQ(s.mesher().numTriangles(), 0u);
+}
+
+TEST(TsdfFusionStage, TheMapFileIsSavedOnShutdownAndReloaded) {
+  const fs::path dir = fs::temp_directory_path() / ("fm_stage_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  TsdfStageOptions opts;
+  opts.map_file = (dir / "map.fmmap").string();
+  opts.reload_map_on_start = true;
+  Wall wall;
+  size_t blocks = 0;
+  {
+    TsdfFusionStage s(smallMap(), opts, quiet());
+    EXPECT_TRUE(s.persistent());
+    for (int i = 0; i < 3; ++i) wall.fuse(s, i, (10 + i) * kS);
+    blocks = s.map().numBlocks();
+    s.shutdown();
+  }
+  ASSERT_TRUE(fs::exists(opts.map_file));
+  TsdfFusionStage again(smallMap(), opts, quiet());
+  EXPECT_EQ(again.map().numBlocks(), blocks);
+  EXPECT_TRUE(again.takeMeshReset());  // the mesh of the reloaded map is to be made
+  again.clear();
+  EXPECT_EQ(again.map().numBlocks(), 0u);
+  fs::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace fisheye_mapping
