@@ -57,8 +57,8 @@ std::string constModel(const std::string& name, const std::string& input_shape,
   return out;
 }
 
-DetectorConfig smallConfig(DetectorHead head, const std::string& model, int in_w, int in_h) {
-  DetectorConfig c;
+DetectorModelConfig smallConfig(DetectorHead head, const std::string& model, int in_w, int in_h) {
+  DetectorModelConfig c;
   c.format = ModelFormat::Onnx;
   c.model_path = model;
   c.head = head;
@@ -109,7 +109,7 @@ TEST(Letterbox, MapsBackByHand) {
 }
 
 TEST(Detector, InputBlobIsGreyReplicatedLetterboxedAndNormalised) {
-  DetectorConfig c = smallConfig(DetectorHead::YoloV5, "", 64, 64);
+  DetectorModelConfig c = smallConfig(DetectorHead::YoloV5, "", 64, 64);
   c.mean = cv::Scalar(10, 20, 30);
   c.std = cv::Scalar(2, 4, 5);
   c.swap_rb = false;
@@ -191,7 +191,7 @@ TEST(DetectorHeads, NanoDetPerStrideOutputs) {
   const auto model = constModel("nanodet", "1,3,32,32",
                                 {valuesFile("n_c8", {1, 16, 3}, c8), valuesFile("n_r8", {1, 16, 16}, r8),
                                  valuesFile("n_c16", {1, 4, 3}, c16), valuesFile("n_r16", {1, 4, 16}, r16)});
-  DetectorConfig c = smallConfig(DetectorHead::NanoDet, model, 32, 32);
+  DetectorModelConfig c = smallConfig(DetectorHead::NanoDet, model, 32, 32);
   c.strides = {8, 16};
   c.reg_max = 3;
   c.center_offset = 0.5f;
@@ -219,7 +219,7 @@ TEST(DetectorHeads, NanoDetMergedOutputAndCentreOffset) {
     merged.insert(merged.end(), r16.begin() + 16 * i, r16.begin() + 16 * i + 16);
   }
   const auto model = constModel("nanodet_merged", "1,3,32,32", {valuesFile("n_m", {1, 20, 19}, merged)});
-  DetectorConfig c = smallConfig(DetectorHead::NanoDet, model, 32, 32);
+  DetectorModelConfig c = smallConfig(DetectorHead::NanoDet, model, 32, 32);
   c.strides = {8, 16};
   c.reg_max = 3;
   c.center_offset = 0.f;  // NanoDet-Plus convention: centres move by -0.5 stride
@@ -254,7 +254,7 @@ TEST(DetectorHeads, DarknetYoloLayer) {
     for (int k = 0; k < 3 * 64; ++k) w[4 * 3 * 64 + k] = 10.f / 64.f;  // objectness filter
     f.write(reinterpret_cast<const char*>(w.data()), w.size() * sizeof(float));
   }
-  DetectorConfig c = smallConfig(DetectorHead::Darknet, weights, 32, 32);
+  DetectorModelConfig c = smallConfig(DetectorHead::Darknet, weights, 32, 32);
   c.format = ModelFormat::Darknet;
   c.darknet_cfg = cfg;
   c.mean = cv::Scalar(0, 0, 0);
@@ -333,7 +333,7 @@ TEST(DetectorConfigFile, PathExpansion) {
 }
 
 TEST(Detector, MissingAndCorruptModelsGiveClearErrors) {
-  DetectorConfig c = smallConfig(DetectorHead::YoloV5, tmpDir() + "/does_not_exist.onnx", 64, 64);
+  DetectorModelConfig c = smallConfig(DetectorHead::YoloV5, tmpDir() + "/does_not_exist.onnx", 64, 64);
   try {
     Detector d(c);
     ADD_FAILURE() << "missing model accepted";
@@ -361,7 +361,7 @@ TEST(Detector, MissingAndCorruptModelsGiveClearErrors) {
 // The real model made by scripts/setup: COCO NanoDet on dog.jpg (Debian's darknet package).
 TEST(NanoDetCoco, FindsTruckAndBicycleInDogJpg) {
   const std::string yaml = FM_CONFIG_DIR "/detector/nanodet.yaml";
-  const DetectorConfig cfg = loadDetectorConfig(yaml);
+  const DetectorModelConfig cfg = loadDetectorConfig(yaml);
   const cv::Mat img = cv::imread("/usr/share/darknet/data/dog.jpg", cv::IMREAD_COLOR);
   if (img.empty()) GTEST_SKIP() << "/usr/share/darknet/data/dog.jpg missing (Debian package darknet)";
   if (!std::ifstream(cfg.model_path).good())
@@ -407,13 +407,13 @@ TEST(DetectorStageConfig, LoadModelAppliesTheOverridesAndModelYamlsCheckTheirThr
   std::ofstream(model) << base << "score_threshold: 0.3\nnms_threshold: 0.5\n";
   fm::DetectorStageConfig c;
   c.model_config = model;
-  const fm::DetectorConfig plain = c.loadModel(), direct = fm::loadDetectorConfig(model);
+  const fm::DetectorModelConfig plain = c.loadModel(), direct = fm::loadDetectorConfig(model);
   EXPECT_FLOAT_EQ(plain.score_threshold, 0.3f);
   EXPECT_FLOAT_EQ(direct.score_threshold, 0.3f);
   EXPECT_FLOAT_EQ(plain.nms_threshold, 0.5f);
   c.score_threshold = 0.61f;
   c.nms_threshold = 0.42f;
-  const fm::DetectorConfig over = c.loadModel();
+  const fm::DetectorModelConfig over = c.loadModel();
   EXPECT_FLOAT_EQ(over.score_threshold, 0.61f);
   EXPECT_FLOAT_EQ(over.nms_threshold, 0.42f);
   EXPECT_EQ(over.class_names, direct.class_names);

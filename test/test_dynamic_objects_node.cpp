@@ -289,13 +289,13 @@ TEST(DynamicObjects, DiagnosticsReconfigureAndCameraInfo) {
   // model"); the real detector counted the float image of the first test as a
   // bad image, not as a callback error.
   Diagnostics::Status st;
-  ASSERT_TRUE(diag.waitFor("depth_mask: masking", [](const auto&) { return true; }, &st));
+  ASSERT_TRUE(diag.waitFor("depth_mask: depth_mask", [](const auto&) { return true; }, &st));
   EXPECT_EQ(st.values["camera_info"].rfind("none received", 0), 0u) << st.values["camera_info"];
-  ASSERT_TRUE(diag.waitFor("broken_detector: detections", [](const auto&) { return true; }, &st));
+  ASSERT_TRUE(diag.waitFor("broken_detector: detector", [](const auto&) { return true; }, &st));
   EXPECT_EQ(st.level, diagnostic_msgs::DiagnosticStatus::ERROR);
   EXPECT_NE(st.message.find("no model"), std::string::npos) << st.message;
   EXPECT_EQ(totalOf(st.values["dropped: no model"]), 3) << "the 3 images of the first test";
-  ASSERT_TRUE(diag.waitFor("detector: detections", [](const auto&) { return true; }, &st));
+  ASSERT_TRUE(diag.waitFor("detector: detector", [](const auto&) { return true; }, &st));
   EXPECT_EQ(totalOf(st.values["dropped: bad image"]), 1);
   EXPECT_EQ(st.values["callback errors"], "0");
   EXPECT_EQ(st.values["score threshold"], "0.3");
@@ -324,7 +324,7 @@ TEST(DynamicObjects, DiagnosticsReconfigureAndCameraInfo) {
     depth_pub.publish(imageMsg(depth, "32FC1", t));
     ros::WallDuration(period - 0.02).sleep();
   }
-  for (const char* name : {"detector: detections", "depth_mask: masking"}) {
+  for (const char* name : {"detector: detector", "depth_mask: depth_mask"}) {
     ASSERT_TRUE(diag.waitFor(name, [](const auto&) { return true; }, &st, 0.1)) << name << " not reported in 1.6 s";
     for (const char* key : {"input rate (Hz)", "output rate (Hz)", "inputs", "outputs", "last input (s ago)",
                             "processing time last/mean/max (ms)", "tf failures", "time resets", "callback errors"})
@@ -359,14 +359,14 @@ TEST(DynamicObjects, DiagnosticsReconfigureAndCameraInfo) {
 
   // 4. Detections withheld: the depth map passes unmasked after the 1 s wait,
   // counted as a drop by that reason, and the mask WARNs naming it.
-  ASSERT_TRUE(diag.waitFor("depth_mask: masking", [](const auto&) { return true; }, &st));
+  ASSERT_TRUE(diag.waitFor("depth_mask: depth_mask", [](const auto&) { return true; }, &st));
   const long unmasked = std::atol(st.values["passed unmasked (no detections in time)"].c_str());
   const long dropped = totalOf(st.values["dropped: no detections in time (passed unmasked)"]);
   const ros::Time tw(1700000300, 0);
   depth_pub.publish(imageMsg(depth, "32FC1", tw));
   ASSERT_TRUE(waitFor([&] { return have(masked, tw); }, 5.0));
   diag.clear();
-  ASSERT_TRUE(diag.waitFor("depth_mask: masking", [](const auto&) { return true; }, &st, 3.0));
+  ASSERT_TRUE(diag.waitFor("depth_mask: depth_mask", [](const auto&) { return true; }, &st, 3.0));
   EXPECT_EQ(std::atol(st.values["passed unmasked (no detections in time)"].c_str()), unmasked + 1);
   EXPECT_EQ(totalOf(st.values["dropped: no detections in time (passed unmasked)"]), dropped + 1);
   EXPECT_EQ(st.level, diagnostic_msgs::DiagnosticStatus::WARN);
@@ -549,7 +549,7 @@ TEST(DynamicObjects, OnlyMovingVehiclesAreMasked) {
   EXPECT_NEAR(centreOf(last, 0), 10.0f, 1e-4) << "the parked car's depth stays";
   EXPECT_TRUE(std::isnan(centreOf(last, 1))) << "the moving car's depth goes";
   Diagnostics::Status st;
-  EXPECT_TRUE(diag.waitFor("depth_mask: masking", [](const Diagnostics::Status& s) {
+  EXPECT_TRUE(diag.waitFor("depth_mask: depth_mask", [](const Diagnostics::Status& s) {
     return s.values.count("vehicle motion") && s.values.at("vehicle motion") == "tracking in map";
   }, &st, 10.0)) << st.values["vehicle motion"];
   // No transform to the depth's frame: every vehicle undecided and masked, named.
@@ -562,7 +562,7 @@ TEST(DynamicObjects, OnlyMovingVehiclesAreMasked) {
       EXPECT_TRUE(v.masked);
     }
   }
-  EXPECT_TRUE(diag.waitFor("depth_mask: masking", [](const Diagnostics::Status& s) {
+  EXPECT_TRUE(diag.waitFor("depth_mask: depth_mask", [](const Diagnostics::Status& s) {
     return s.values.count("vehicle motion") && s.values.at("vehicle motion").rfind("no tf map -> cam_nowhere", 0) == 0;
   }, &st, 10.0)) << st.values["vehicle motion"];
 }

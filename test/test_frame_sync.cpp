@@ -7,7 +7,7 @@
 
 using namespace fisheye_mapping;
 
-TEST(FrameSync, ExactTenCamerasInterleaved) {
+TEST(Sync, ExactTenCamerasInterleaved) {
   FrameSetSync<std::string> sync(10, SyncPolicy::Exact, 0.0, 8);
   int sets = 0;
   // Two frame times, cameras arriving interleaved and in reverse order.
@@ -27,7 +27,7 @@ TEST(FrameSync, ExactTenCamerasInterleaved) {
   EXPECT_EQ(sync.stats().dropped_incomplete, 0u);
 }
 
-TEST(FrameSync, ExactDropsIncompleteSetsWhenALaterOneCompletes) {
+TEST(Sync, ExactDropsIncompleteSetsWhenALaterOneCompletes) {
   FrameSetSync<int> sync(3, SyncPolicy::Exact, 0.0, 8);
   sync.add(0, 100, 0);
   sync.add(1, 100, 1);  // cam2's image of t=100 is lost
@@ -45,7 +45,7 @@ TEST(FrameSync, ExactDropsIncompleteSetsWhenALaterOneCompletes) {
   EXPECT_TRUE(sync.add(2, 300, 2).empty());
 }
 
-TEST(FrameSync, ApproximateWithinMaxInterval) {
+TEST(Sync, ApproximateWithinMaxInterval) {
   FrameSetSync<int> sync(3, SyncPolicy::Approximate, 0.002, 8);  // 2 ms
   const std::int64_t ms = 1000000;
   sync.add(0, 100 * ms, 0);
@@ -65,7 +65,7 @@ TEST(FrameSync, ApproximateWithinMaxInterval) {
   EXPECT_EQ(sync.stats().dropped_incomplete, 2u);  // {cam0, cam2 @200} and {cam1 @203}
 }
 
-TEST(FrameSync, QueueBoundsOpenSetsAndBadArguments) {
+TEST(Sync, QueueBoundsOpenSetsAndBadArguments) {
   FrameSetSync<int> sync(2, SyncPolicy::Exact, 0.0, 3);
   for (int t = 1; t <= 5; ++t) sync.add(0, t, 0);  // camera 1 silent
   EXPECT_EQ(sync.open(), 3u);

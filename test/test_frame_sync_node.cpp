@@ -1,4 +1,4 @@
-// rostest: the FrameSync nodelet groups the rig's camera topics into frame sets
+// rostest: the Sync nodelet groups the rig's camera topics into frame sets
 // in camera order with the reference header, drops and counts incomplete sets
 // and wrongly sized images, reports a silent camera by name in /diagnostics,
 // drops small steps back in time and resets when time goes back further;
@@ -50,7 +50,7 @@ TEST(FrameSyncNode, GroupsDropsAndDiagnoses) {
   auto dsub = nh.subscribe<diagnostic_msgs::DiagnosticArray>("/diagnostics", 10, [&](const diagnostic_msgs::DiagnosticArrayConstPtr& m) {
     std::lock_guard<std::mutex> l(mu);
     for (const auto& s : m->status)
-      if (s.name == "sync: frame sets") last = s;
+      if (s.name == "sync: sync") last = s;
   });
   ros::AsyncSpinner spinner(1);
   spinner.start();
@@ -196,7 +196,7 @@ TEST(FrameSyncNode, RatesCameraInfoRigAndReconfigure) {
   auto dsub = nh.subscribe<diagnostic_msgs::DiagnosticArray>("/diagnostics", 50, [&](const diagnostic_msgs::DiagnosticArrayConstPtr& m) {
     std::lock_guard<std::mutex> l(mu);
     for (const auto& s : m->status)
-      if (s.name == "sync: frame sets") reports.push_back(s);
+      if (s.name == "sync: sync") reports.push_back(s);
   });
   ros::AsyncSpinner spinner(1);
   spinner.start();

@@ -57,7 +57,7 @@ TEST(LaunchFiles, VehicleLaunchStopsOnAMissingBagOrCalibration) {
   // The good case first: the arguments evaluate and the nodes are listed.
   auto r = nodes("bag:=none rviz:=false" + rig);
   ASSERT_EQ(r.status, 0) << r.out;
-  EXPECT_NE(r.out.find("/fisheye_mapping/plane_sweep"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("/fisheye_mapping/depth"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("/fisheye_mapping/tsdf"), std::string::npos) << r.out;
 
   r = nodes("bag:=/nonexistent/drive.bag rviz:=false" + rig);

@@ -288,7 +288,7 @@ TEST(OfflineMapper, MapsADriveAndWritesTimings) {
   }
   // A --config key or section that no stage declares (a typo) stops the run,
   // named with the file, the section and the known names; nothing is mapped.
-  std::ofstream(kDir + "/typo_key.yaml") << "plane_sweep:\n  resolution: full\ntsdf:\n  max_rnge: 15\n";
+  std::ofstream(kDir + "/typo_key.yaml") << "depth:\n  resolution: full\ntsdf:\n  max_rnge: 15\n";
   out = run(base + " --out " + kDir + "/map --config " + kDir + "/typo_key.yaml", &rc);
   EXPECT_EQ(WEXITSTATUS(rc), 1) << out;
   EXPECT_NE(out.find("offline_mapper: " + kDir + "/typo_key.yaml: unknown parameter 'max_rnge' in section 'tsdf' (known: "),
@@ -298,7 +298,7 @@ TEST(OfflineMapper, MapsADriveAndWritesTimings) {
   std::ofstream(kDir + "/typo_section.yaml") << "tsfd:\n  max_range: 15\n";
   out = run(base + " --out " + kDir + "/map --config " + kDir + "/typo_section.yaml", &rc);
   EXPECT_EQ(WEXITSTATUS(rc), 1) << out;
-  EXPECT_NE(out.find("offline_mapper: " + kDir + "/typo_section.yaml: unknown section 'tsfd' (known: sync, plane_sweep, "
+  EXPECT_NE(out.find("offline_mapper: " + kDir + "/typo_section.yaml: unknown section 'tsfd' (known: sync, depth, "
                      "detector, depth_mask, tsdf, rig_tf)"),
             std::string::npos)
       << out;

@@ -27,9 +27,9 @@
 
 #include "fisheye_mapping/DepthMaskReconfigureConfig.h"
 #include "fisheye_mapping/DetectorReconfigureConfig.h"
-#include "fisheye_mapping/FrameSyncReconfigureConfig.h"
-#include "fisheye_mapping/PlaneSweepFiltersConfig.h"
-#include "fisheye_mapping/TsdfFusionConfig.h"
+#include "fisheye_mapping/SyncReconfigureConfig.h"
+#include "fisheye_mapping/DepthReconfigureConfig.h"
+#include "fisheye_mapping/TsdfReconfigureConfig.h"
 #include "fisheye_mapping/core/common/param_table.h"
 #include "fisheye_mapping/core/depth/depth_stage.h"
 #include "fisheye_mapping/core/detection/depth_mask.h"
@@ -441,12 +441,12 @@ void checkCfg(const std::string& cfg, const Tables&... tables) {
 }
 
 TEST(ParamDeclarations, CfgFilesAreTheRunTimeDeclarationsWithoutRangesOfTheirOwn) {
-  checkCfg<fisheye_mapping::FrameSyncReconfigureConfig>("cfg/FrameSyncReconfigure.cfg", fm::FrameSyncConfig::params());
-  checkCfg<fisheye_mapping::PlaneSweepFiltersConfig>("cfg/PlaneSweepFilters.cfg", fm::PlaneSweepConfig::params());
+  checkCfg<fisheye_mapping::SyncReconfigureConfig>("cfg/SyncReconfigure.cfg", fm::FrameSyncConfig::params());
+  checkCfg<fisheye_mapping::DepthReconfigureConfig>("cfg/DepthReconfigure.cfg", fm::PlaneSweepConfig::params());
   checkCfg<fisheye_mapping::DetectorReconfigureConfig>("cfg/DetectorReconfigure.cfg",
                                                        fm::DetectorStageConfig::params());
   checkCfg<fisheye_mapping::DepthMaskReconfigureConfig>("cfg/DepthMaskReconfigure.cfg", fm::DepthMaskConfig::params());
-  checkCfg<fisheye_mapping::TsdfFusionConfig>("cfg/TsdfFusion.cfg", fm::TsdfConfig::params(),
+  checkCfg<fisheye_mapping::TsdfReconfigureConfig>("cfg/TsdfReconfigure.cfg", fm::TsdfConfig::params(),
                                               fm::TsdfNodeOptions::params());
 }
 
@@ -456,7 +456,7 @@ TEST(ParamDeclarations, TheReportedReconfigureCasesAreRefusedOrKept) {
   std::string error;
   fm::TsdfConfig tsdf;
   tsdf.max_range = 15.0;
-  fm::TsdfFusionConfig t = fm::TsdfFusionConfig::__getDefault__();
+  fm::TsdfReconfigureConfig t = fm::TsdfReconfigureConfig::__getDefault__();
   t.max_range = -3;
   dynamic_reconfigure::Config msg;
   t.__toMessage__(msg);
@@ -468,14 +468,14 @@ TEST(ParamDeclarations, TheReportedReconfigureCasesAreRefusedOrKept) {
   ASSERT_TRUE(far);
   EXPECT_EQ(far->max_range, 100000);
 
-  fm::PlaneSweepFiltersConfig p = fm::PlaneSweepFiltersConfig::__getDefault__();
+  fm::DepthReconfigureConfig p = fm::DepthReconfigureConfig::__getDefault__();
   p.near = 80;
   p.__toMessage__(msg);
   EXPECT_FALSE(fm::reconfigured(fm::PlaneSweepConfig::params(), fm::PlaneSweepConfig(), msg, error));
   EXPECT_TRUE(contains(error, "far")) << error;
   EXPECT_TRUE(contains(error, "80")) << error;
 
-  fm::FrameSyncReconfigureConfig s = fm::FrameSyncReconfigureConfig::__getDefault__();
+  fm::SyncReconfigureConfig s = fm::SyncReconfigureConfig::__getDefault__();
   s.policy = "bogus";
   s.__toMessage__(msg);
   EXPECT_FALSE(fm::reconfigured(fm::FrameSyncConfig::params(), fm::FrameSyncConfig(), msg, error));
@@ -511,7 +511,7 @@ void checkDefaultsFile(const std::string& file, const std::string& section) {
 }
 
 TEST(ParamDeclarations, StageDefaultFilesUseOnlyDeclaredNamesAtTheirDefaults) {
-  checkDefaultsFile("plane_sweep_depth.yaml", "plane_sweep");
+  checkDefaultsFile("plane_sweep_depth.yaml", "depth");
   checkDefaultsFile("tsdf_fusion.yaml", "tsdf");
 }
 

@@ -262,7 +262,7 @@ TEST(PlaneSweepPlanes, GroundHeightShiftsTheGroundFamilyWithTheBaseFrame) {
   EXPECT_NEAR(a[on_road.fronto_planes].d - c[on_road.fronto_planes].d, 0.3, 1e-5);
 }
 
-TEST(PlaneSweepFilters, EachFilterByHand) {
+TEST(DepthReconfigure, EachFilterByHand) {
   cv::Mat raw(5, 5, CV_32FC1, cv::Scalar(10.0f)), cost(5, 5, CV_32FC1, cv::Scalar(0.01f)),
       ratio(5, 5, CV_32FC1, cv::Scalar(0.5f));
   cost.at<float>(0, 0) = 0.1f;  // upper half: alpha 0.05 -> dropped
@@ -590,7 +590,7 @@ INSTANTIATE_TEST_SUITE_P(Products, PlaneSweepBackends, ::testing::Values("opencl
 // The infinity filter by hand: a depth whose best cost beats the cost at
 // infinity by less than infinity_margin goes; NaN (no cost at infinity)
 // keeps it; the filter off keeps everything.
-TEST(PlaneSweepFilters, InfinityFilterByHand) {
+TEST(DepthReconfigure, InfinityFilterByHand) {
   cv::Mat raw(3, 3, CV_32FC1, cv::Scalar(10.0f)), cost(3, 3, CV_32FC1, cv::Scalar(0.02f)),
       ratio(3, 3, CV_32FC1, cv::Scalar(0.5f)), infinity(3, 3, CV_32FC1, cv::Scalar(0.3f));
   infinity.at<float>(0, 0) = 0.025f;  // beats infinity by 0.005 < 0.01: dropped
@@ -618,7 +618,7 @@ TEST(PlaneSweepFilters, InfinityFilterByHand) {
 // the sweep's windows fattened the facade's depth 3 rows into the sky. Those
 // rows go; the facade's own rows stay, also at the edge; a small hole in the
 // facade is not a sky.
-TEST(PlaneSweepFilters, NoParallaxEdgesDropTheFattenedBandOnly) {
+TEST(DepthReconfigure, NoParallaxEdgesDropTheFattenedBandOnly) {
   const int w = 60, h = 40;
   cv::Mat image(h, w, CV_8UC1, cv::Scalar(60)), raw(h, w, CV_32FC1, cv::Scalar(NAN)), cost(h, w, CV_32FC1, cv::Scalar(0.02f)),
       infinity(h, w, CV_32FC1, cv::Scalar(0.3f)), valid(h, w, CV_8UC1, cv::Scalar(255));

@@ -1,4 +1,4 @@
-// rostest: the PlaneSweepDepth nodelet subscribes only while someone listens,
+// rostest: the Depth nodelet subscribes only while someone listens,
 // turns rendered frame sets into depth with the reference image's header that
 // matches the rendered truth, and skips bad frame sets without going down;
 // depth/camera_info is the camchain's reference camera and depth/image_z is
@@ -176,7 +176,7 @@ TEST(PlaneSweepDepthNode, LazyDepthWithTheReferenceHeaderMatchingTruth) {
     }
   }
   // dynamic_reconfigure: a stricter uniqueness ratio keeps fewer pixels.
-  setMaxRatio("plane_sweep", 0.5);
+  setMaxRatio("depth", 0.5);
   const int before = cv::countNonZero(d == d);  // d: the first depth's (its message held by `first`)
   fisheye_mapping::CameraFrameSet strict = set;
   strict.header.stamp += ros::Duration(1.0);
@@ -200,11 +200,11 @@ TEST(PlaneSweepDepthNode, RigFromCameraInfoGivesTheCamchainDepth) {
   for (auto& img : set.images) img.header.stamp = set.header.stamp;
   fisheye_mapping::CameraFrameSet ci_set = set;
   for (const auto& img : set.images) ci_set.camera_infos.push_back(smallRigInfo(img.header));
-  // Both nodes with the same filters (the first test made /plane_sweep's stricter).
+  // Both nodes with the same filters (the first test made /depth's stricter).
   // The config's value (0.9) on both; reconfigured on the ci node before its
   // stage exists, so its stage must be built with it.
-  setMaxRatio("plane_sweep", 0.9);
-  setMaxRatio("ci/plane_sweep", 0.9);
+  setMaxRatio("depth", 0.9);
+  setMaxRatio("ci/depth", 0.9);
 
   std::mutex m;
   std::map<std::string, std::string> diag;  // the ci node's depth status
@@ -212,7 +212,7 @@ TEST(PlaneSweepDepthNode, RigFromCameraInfoGivesTheCamchainDepth) {
       "/diagnostics", 20, [&](const diagnostic_msgs::DiagnosticArrayConstPtr& a) {
         std::lock_guard<std::mutex> lock(m);
         for (const auto& st : a->status) {
-          if (st.name.find("ci/plane_sweep") == std::string::npos) continue;
+          if (st.name.find("ci/depth") == std::string::npos) continue;
           for (const auto& kv : st.values) diag[kv.key] = kv.value;
         }
       });
@@ -299,8 +299,8 @@ TEST(PlaneSweepDepthNode, CameraInfoChainFromImagesToMap) {
   const fm::Rig rig = smallRig();
   cv::Mat truth;
   const fisheye_mapping::CameraFrameSet set = renderedSet(rig, &truth);
-  setMaxRatio("plane_sweep", 0.9);
-  setMaxRatio("e2e/plane_sweep", 0.9);
+  setMaxRatio("depth", 0.9);
+  setMaxRatio("e2e/depth", 0.9);
   tf2_ros::StaticTransformBroadcaster static_tf;
   tf2_ros::TransformBroadcaster tf;
   std::vector<geometry_msgs::TransformStamped> mount;
@@ -458,9 +458,9 @@ TEST(PlaneSweepDepthNode, SelfCalibrationStateAndSaveService) {
   const std::string subfolder = "fm_test_plane_sweep_node_" + std::to_string(getpid());
   fisheye_mapping::FilePath srv;
   srv.request.path = subfolder + "/camchain.yaml";
-  ASSERT_TRUE(ros::service::waitForService("plane_sweep/save_calibration", ros::Duration(10.0)));
+  ASSERT_TRUE(ros::service::waitForService("depth/save_calibration", ros::Duration(10.0)));
   for (int k = 0; k < 2; ++k) {
-    ASSERT_TRUE(ros::service::call("plane_sweep/save_calibration", srv));
+    ASSERT_TRUE(ros::service::call("depth/save_calibration", srv));
     EXPECT_TRUE(srv.response.success) << srv.response.message;
   }
   const std::string dir = std::filesystem::canonical(folder / subfolder).string();
@@ -474,13 +474,13 @@ TEST(PlaneSweepDepthNode, SelfCalibrationStateAndSaveService) {
                   .angle() * 180 / M_PI, state->cameras[c].correction_deg + 1e-6);
   }
   srv.request.path = dir;
-  ASSERT_TRUE(ros::service::call("plane_sweep/save_calibration", srv));
+  ASSERT_TRUE(ros::service::call("depth/save_calibration", srv));
   EXPECT_FALSE(srv.response.success);
   EXPECT_NE(srv.response.message.find(dir), std::string::npos) << srv.response.message;
   // Outside the save folder: refused naming it, nothing written there.
   const std::string outside = "/tmp/fm_test_plane_sweep_outside_" + std::to_string(getpid()) + ".yaml";
   srv.request.path = outside;
-  ASSERT_TRUE(ros::service::call("plane_sweep/save_calibration", srv));
+  ASSERT_TRUE(ros::service::call("depth/save_calibration", srv));
   EXPECT_FALSE(srv.response.success);
   EXPECT_NE(srv.response.message.find("outside the save folder " + std::filesystem::canonical(folder).string()),
             std::string::npos)

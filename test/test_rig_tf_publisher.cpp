@@ -1,4 +1,4 @@
-// rostest: the RigTfPublisher nodelet, loaded into a nodelet manager through
+// rostest: the RigTf nodelet, loaded into a nodelet manager through
 // pluginlib, publishes the rig's mounts on /tf_static; a second instance with a
 // malformed calibration does not bring the manager down.
 #include <gtest/gtest.h>
@@ -9,7 +9,7 @@
 
 namespace {
 
-TEST(RigTfPublisher, PublishesTheMountsOfTheRig) {
+TEST(RigTf, PublishesTheMountsOfTheRig) {
   tf2_ros::Buffer buffer;
   tf2_ros::TransformListener listener(buffer);
   std::string error;
@@ -36,7 +36,7 @@ TEST(RigTfPublisher, PublishesTheMountsOfTheRig) {
   EXPECT_EQ(t1.header.frame_id, "base_link");
 }
 
-TEST(RigTfPublisher, BadCalibrationLeavesTheManagerRunning) {
+TEST(RigTf, BadCalibrationLeavesTheManagerRunning) {
   ASSERT_TRUE(ros::service::waitForService("/manager/list", ros::Duration(30.0)));
   // Both instances were loaded (loading waits for onInit), the bad one too.
   nodelet::NodeletList list;

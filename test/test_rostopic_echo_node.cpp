@@ -39,8 +39,8 @@ const std::string kNs = "/fisheye_mapping";
 // Every output topic of the stages (their advertise() calls) that this
 // launch must offer: a missing one fails the test too.
 const std::vector<std::string> kOutputs = {
-    "frames",                                        // FrameSync: fisheye_mapping/CameraFrameSet
-    "depth/image", "depth/image_z", "depth/cost",    // PlaneSweepDepth: sensor_msgs/Image
+    "frames",                                        // Sync: fisheye_mapping/CameraFrameSet
+    "depth/image", "depth/image_z", "depth/cost",    // Depth: sensor_msgs/Image
     "depth/camera_info",                             // sensor_msgs/CameraInfo
     "depth/self_calibration",                        // fisheye_mapping/RigSelfCalibration (latched)
     "detections",                                    // Detector: fisheye_mapping/Detection2DArray
@@ -48,7 +48,7 @@ const std::vector<std::string> kOutputs = {
     "depth_masked/image", "depth_masked/mask", "depth_masked/colour",  // DepthMask: sensor_msgs/Image
     "depth_masked/camera_info",                      // sensor_msgs/CameraInfo
     "depth_masked/vehicles",                         // fisheye_mapping/TrackedVehicleArray
-    "tsdf/mesh",                                     // TsdfFusion: visualization_msgs/MarkerArray
+    "tsdf/mesh",                                     // Tsdf: visualization_msgs/MarkerArray
     "tsdf/cloud",                                    // sensor_msgs/PointCloud2 (latched)
     "tsdf/fusion_done",                              // fisheye_mapping/FrameDone
 };

@@ -169,7 +169,7 @@ TEST(TimeReset, SecondPlayOfTheBagIsProcessedByEveryStage) {
         std::lock_guard<std::mutex> l(mu);
         for (const auto& s : m->status) {
           std::string stage;
-          for (const char* suffix : {": frame sets", ": depth", ": masking"}) {
+          for (const char* suffix : {": sync", ": depth", ": depth_mask"}) {
             const std::string sf(suffix);
             if (s.name.size() > sf.size() && s.name.compare(s.name.size() - sf.size(), sf.size(), sf) == 0) stage = sf.substr(2);
           }
@@ -237,12 +237,12 @@ TEST(TimeReset, SecondPlayOfTheBagIsProcessedByEveryStage) {
   // The reset is on /diagnostics: WARN with "time resets" >= 1 (published every second).
   const bool reported = waitFor([&] {
     std::lock_guard<std::mutex> l(mu);
-    return reset_seen.count("frame sets") && reset_seen["frame sets"].level >= 1 && reset_seen.count("depth") &&
-           reset_seen.count("masking");
+    return reset_seen.count("sync") && reset_seen["sync"].level >= 1 && reset_seen.count("depth") &&
+           reset_seen.count("depth_mask");
   }, 10.0);
   std::lock_guard<std::mutex> l(mu);
   EXPECT_TRUE(reported) << "not every stage reported the time reset on /diagnostics";
-  for (const char* stage : {"frame sets", "depth", "masking"}) {
+  for (const char* stage : {"sync", "depth", "depth_mask"}) {
     ASSERT_TRUE(reset_seen.count(stage)) << "stage '" << stage << "' reported no time reset; latest: "
                                          << latest[stage].message;
     StageStatus& st = reset_seen[stage];
@@ -251,15 +251,15 @@ TEST(TimeReset, SecondPlayOfTheBagIsProcessedByEveryStage) {
     std::printf("%s: level %d, %s time reset(s): %s\n", stage, st.level, st.values["time resets"].c_str(),
                 st.values["last time reset"].c_str());
   }
-  EXPECT_EQ(reset_seen["frame sets"].values["time resets"], "1") << "one reset for one replay";
-  EXPECT_EQ(latest["frame sets"].values["callback errors"], "0");
+  EXPECT_EQ(reset_seen["sync"].values["time resets"], "1") << "one reset for one replay";
+  EXPECT_EQ(latest["sync"].values["callback errors"], "0");
   EXPECT_EQ(latest["depth"].values["callback errors"], "0");
-  EXPECT_EQ(latest["masking"].values["callback errors"], "0");
+  EXPECT_EQ(latest["depth_mask"].values["callback errors"], "0");
   // Without the reset every depth map of the second play would pass unmasked
   // (its detections' stamps were already released in the first play). The
   // first frame set of a play may race the mask's subscription to the new
   // player's detection topic: at most one per play.
-  EXPECT_LE(std::atoi(latest["masking"].values["passed unmasked (no detections in time)"].c_str()), 2)
+  EXPECT_LE(std::atoi(latest["depth_mask"].values["passed unmasked (no detections in time)"].c_str()), 2)
       << "depth maps were not paired with their detections";
   if (!HasFailure()) std::system(("rm -rf " + dir + " " + dir + ".log").c_str());
 }

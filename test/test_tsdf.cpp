@@ -51,7 +51,7 @@ std::string tempDir() {
   return mkdtemp(tmpl);
 }
 
-class TsdfFusion : public ::testing::Test {
+class Tsdf : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     config_ = new TsdfConfig();
@@ -70,10 +70,10 @@ class TsdfFusion : public ::testing::Test {
   static TsdfConfig* config_;
   static TsdfMap* map_;
 };
-TsdfConfig* TsdfFusion::config_ = nullptr;
-TsdfMap* TsdfFusion::map_ = nullptr;
+TsdfConfig* Tsdf::config_ = nullptr;
+TsdfMap* Tsdf::map_ = nullptr;
 
-TEST_F(TsdfFusion, TsdfMatchesTheSignedDistanceNearTheSurface) {
+TEST_F(Tsdf, TsdfMatchesTheSignedDistanceNearTheSurface) {
   const Scene scene = objectsScene();
   const double vs = config_->voxel_size, mu = config_->truncation();
   double sq = 0, sq_band = 0;
@@ -125,7 +125,7 @@ bool nearCrease(const Scene& scene, const Eigen::Vector3d& p, double voxel) {
   return close >= 2;
 }
 
-TEST_F(TsdfFusion, MeshVerticesLieOnTheTrueSurface) {
+TEST_F(Tsdf, MeshVerticesLieOnTheTrueSurface) {
   TsdfMesher mesher(config_->min_observations);
   mesher.rebuild(*map_);
   const Scene scene = objectsScene();

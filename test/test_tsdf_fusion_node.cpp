@@ -1,4 +1,4 @@
-// rostest: the TsdfFusion nodelet fuses analytic fisheye depth frames whose
+// rostest: the Tsdf nodelet fuses analytic fisheye depth frames whose
 // poses come over tf; mesh and cloud arrive in the map frame and lie on the
 // true surfaces; bad frames are skipped and counted in /diagnostics; the
 // mesh stream keeps rviz's rules over the whole run; the services save, load
@@ -181,7 +181,7 @@ class TsdfFusionNode : public ::testing::Test {
             for (const auto& kv : st.values) diag[kv.key] = kv.value;
           }
         }));
-    ASSERT_TRUE(waitFor([this] { return depth_pub_.getNumSubscribers() > 0; }, 30.0)) << "TsdfFusion never subscribed";
+    ASSERT_TRUE(waitFor([this] { return depth_pub_.getNumSubscribers() > 0; }, 30.0)) << "Tsdf never subscribed";
   }
 
   // Publishes the vehicle pose (map -> base_link) and the depth the camera sees.

@@ -1,4 +1,4 @@
-// The TSDF stage without ROS (TsdfFusionStage, what the TsdfFusion nodelet
+// The TSDF stage without ROS (TsdfFusionStage, what the Tsdf nodelet
 // runs) and the order-keeping wait of its depth frames (OrderedWait): checked
 // against hand-made sequences, an analytic wall and the files on disk.
 #include <gtest/gtest.h>

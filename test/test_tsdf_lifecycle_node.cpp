@@ -1,4 +1,4 @@
-// rostest: the TsdfFusion node's life cycle, with the node in its own process
+// rostest: the Tsdf node's life cycle, with the node in its own process
 // (started, signalled and respawned here): SIGTERM saves the map like SIGINT
 // and a restart with ~reload_map_on_start resumes it bit for bit; a respawn
 // after kill -9 never writes an empty map over the saved one; autosave keeps
@@ -81,7 +81,7 @@ std::map<std::tuple<int, int, int>, fm::VoxelBlock> loadBlocks(const std::string
   return ::testing::AssertionSuccess();
 }
 
-// One TsdfFusion in its own process (`nodelet standalone`), named `name`,
+// One Tsdf in its own process (`nodelet standalone`), named `name`,
 // its topics prefixed with the name.
 // Its ~save_directory (the test's folder; set by the fixture): the
 // shutdown/autosave and service paths below lie in it.
@@ -97,7 +97,7 @@ class FusionProcess {
     ros::param::set("/" + name + "/publish_period", 0.2);
     ros::param::set("/" + name + "/save_directory", g_save_directory);
     for (const auto& kv : params) ros::param::set("/" + name + "/" + kv.first, kv.second);
-    const std::vector<std::string> args = {"rosrun", "nodelet", "nodelet", "standalone", "fisheye_mapping/TsdfFusion",
+    const std::vector<std::string> args = {"rosrun", "nodelet", "nodelet", "standalone", "fisheye_mapping/Tsdf",
                                            "__name:=" + name, "depth_masked/image:=/" + name + "/depth_in",
                                            "tsdf/fusion_done:=/" + name + "/done", "tsdf/mesh:=/" + name + "/mesh",
                                            "tsdf/cloud:=/" + name + "/cloud"};

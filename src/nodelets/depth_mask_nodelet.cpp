@@ -50,7 +50,7 @@
 // both stamps. Without it, a bag played twice would find its detections
 // "late" (their stamps were released in the first play) and pass every depth
 // map unmasked.
-// /diagnostics (StageMonitor, task "masking"): depth rates in / out, masking
+// /diagnostics (StageMonitor, task "depth_mask"): depth rates in / out, masking
 // time, drops by reason ("no detections in time (passed unmasked)", "queue
 // full (passed unmasked)", "queue full (detection sets)", "late detections",
 // "time reset (waiting depth maps)", "stale (old timeline)", "bad depth
@@ -107,7 +107,7 @@ class DepthMaskNodelet : public nodelet::Nodelet {
       const DepthMaskNodeOptions options = DepthMaskNodeOptions::params().read(RosParams(pnh), DepthMaskNodeOptions());
       transport_ = options.image_transport;
       world_frame_ = options.world_frame;
-      monitor_ = std::make_unique<StageMonitor>(nh, pnh, "masking");
+      monitor_ = std::make_unique<StageMonitor>(nh, pnh, "depth_mask");
     } catch (const std::exception& e) {
       NODELET_FATAL("depth mask not started: %s", e.what());
       return;

@@ -22,7 +22,7 @@
 // A model that cannot be loaded is reported and the nodelet keeps running
 // (publishing nothing, no reconfigure server); bad images and any exception in
 // a callback are logged with the image stamp, counted and skipped.
-// /diagnostics (StageMonitor, task "detections"): image rates, detection sets
+// /diagnostics (StageMonitor, task "detector"): image rates, detection sets
 // out, inference time per image, drops ("bad image", "no model"), callback
 // errors, the thresholds in use; ERROR without a model. Stateless in time:
 // nothing to reset when time goes backwards.
@@ -68,7 +68,7 @@ class DetectorNodelet : public nodelet::Nodelet {
   void onInit() override {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
-    monitor_ = std::make_unique<StageMonitor>(nh, pnh, "detections");
+    monitor_ = std::make_unique<StageMonitor>(nh, pnh, "detector");
     monitor_->setExtraReport([this](diagnostic_updater::DiagnosticStatusWrapper& stat) { report(stat); });
     monitor_->setInputExpected(false);
     loadModel(pnh);
@@ -89,7 +89,7 @@ class DetectorNodelet : public nodelet::Nodelet {
       requireKnownParams(pnh, {DetectorStageConfig::params().names(), DetectorNodeOptions::params().names()});
       transport_ = DetectorNodeOptions::params().read(RosParams(pnh), DetectorNodeOptions()).image_transport;
       stage_ = DetectorStageConfig::fromParams(RosParams(pnh));
-      const DetectorConfig cfg = stage_.loadModel();
+      const DetectorModelConfig cfg = stage_.loadModel();
       const DnnDevice device = stage_.device();
       detector_ = std::make_unique<Detector>(cfg, device);
       // The thresholds in effect (the model YAML's unless overridden) are the running ones.

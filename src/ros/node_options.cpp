@@ -86,7 +86,7 @@ const ParamTable<FrameSyncNodeOptions>& FrameSyncNodeOptions::params() {
 const ParamTable<DepthNodeOptions>& DepthNodeOptions::params() {
   using C = DepthNodeOptions;
   static const ParamTable<C> t = [] {
-    ParamTable<C> t("plane_sweep node");
+    ParamTable<C> t("depth node");
     t.include(RigSourceOptions::params(), [](C& c) -> RigSourceOptions& { return c.rig; })
         .text("base_frame", [](C& c) -> std::string& { return c.base_frame; },
               "rig_source camera_info: the tf frame the cameras are mounted on")

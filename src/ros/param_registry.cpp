@@ -83,17 +83,17 @@ void NodeParamSet::requireKnown(const std::vector<std::string>& keys, const std:
 
 const std::vector<NodeParamSet>& nodeParamSets() {
   static const std::vector<NodeParamSet> sets = {
-      makeSet<FrameSyncConfig, FrameSyncNodeOptions>("sync", "fisheye_mapping/FrameSync", "FrameSyncConfig",
-                                                     "FrameSyncNodeOptions", "cfg/FrameSyncReconfigure.cfg"),
-      makeSet<DepthStageConfig, DepthNodeOptions>("plane_sweep", "fisheye_mapping/PlaneSweepDepth", "DepthStageConfig",
-                                                  "DepthNodeOptions", "cfg/PlaneSweepFilters.cfg"),
+      makeSet<FrameSyncConfig, FrameSyncNodeOptions>("sync", "fisheye_mapping/Sync", "FrameSyncConfig",
+                                                     "FrameSyncNodeOptions", "cfg/SyncReconfigure.cfg"),
+      makeSet<DepthStageConfig, DepthNodeOptions>("depth", "fisheye_mapping/Depth", "DepthStageConfig",
+                                                  "DepthNodeOptions", "cfg/DepthReconfigure.cfg"),
       makeSet<DetectorStageConfig, DetectorNodeOptions>("detector", "fisheye_mapping/Detector", "DetectorStageConfig",
                                                         "DetectorNodeOptions", "cfg/DetectorReconfigure.cfg"),
       makeSet<DepthMaskConfig, DepthMaskNodeOptions>("depth_mask", "fisheye_mapping/DepthMask", "DepthMaskConfig",
                                                      "DepthMaskNodeOptions", "cfg/DepthMaskReconfigure.cfg"),
-      makeSet<TsdfConfig, TsdfNodeOptions>("tsdf", "fisheye_mapping/TsdfFusion", "TsdfConfig", "TsdfNodeOptions",
-                                           "cfg/TsdfFusion.cfg"),
-      makeNodeOnly<RigTfNodeOptions>("rig_tf", "fisheye_mapping/RigTfPublisher", "RigTfNodeOptions"),
+      makeSet<TsdfConfig, TsdfNodeOptions>("tsdf", "fisheye_mapping/Tsdf", "TsdfConfig", "TsdfNodeOptions",
+                                           "cfg/TsdfReconfigure.cfg"),
+      makeNodeOnly<RigTfNodeOptions>("rig_tf", "fisheye_mapping/RigTf", "RigTfNodeOptions"),
   };
   return sets;
 }

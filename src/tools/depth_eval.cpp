@@ -78,7 +78,7 @@ const char* kUsage =
     "    --sweep-camchain F  the sweep uses this camchain instead (e.g. refine_rig's output)\n"
     "    --every-plane     sweep every plane at every pixel (no skipped work, no coarse-to-fine\n"
     "                      search): the reference for what the stage's less work costs\n"
-    "    --wall-planes N   wall planes on each side (plane_sweep wall_planes; default the sweep's)\n"
+    "    --wall-planes N   wall planes on each side (depth wall_planes; default the sweep's)\n"
     "    --cloudy-sky      an overcast sky as contrasted as a real one (make_drive --cloudy-sky)\n"
     "  vcharge: motion stereo on the V-Charge sequence in --data, checked without ground truth\n"
     "    --ground-z Z      nominal ground height in the system frame   --label TEXT  CSV code column\n"
@@ -214,10 +214,10 @@ int runSynthetic(const std::map<std::string, std::string>& a) {
     return c;
   };
   fm::DepthFilterConfig vehicle_filters = base.filters, no_texture = base.filters;
-  // The filters of config/vehicle.yaml's plane_sweep section, read through
+  // The filters of config/vehicle.yaml's depth section, read through
   // the same declarations as the depth nodelet (not copied by hand).
   vehicle_filters = fm::DepthFilterConfig::fromParams(
-      fm::YamlParams(YAML::LoadFile(FM_CONFIG_DIR "/vehicle.yaml")["plane_sweep"], "config/vehicle.yaml"), base.filters);
+      fm::YamlParams(YAML::LoadFile(FM_CONFIG_DIR "/vehicle.yaml")["depth"], "config/vehicle.yaml"), base.filters);
   no_texture.texture = false;
   using Res = fm::SweepResolution;
   fm::PlaneSweep full(configured(Res::Full, none)), half(configured(Res::Half, none)),

@@ -67,7 +67,7 @@ int main(int argc, char** argv) {
   if (rc >= 0) return rc;
   try {
     if (config.empty()) throw std::runtime_error("--config is required");
-    const fm::DetectorConfig cfg = fm::loadDetectorConfig(config);
+    const fm::DetectorModelConfig cfg = fm::loadDetectorConfig(config);
     cv::Mat image;
     std::string source;
     if (!image_path.empty()) {

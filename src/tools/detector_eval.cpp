@@ -268,7 +268,7 @@ int main(int argc, char** argv) {
     fm::DetectorStageConfig stage;
     stage.model_config = o.config;
     stage.dnn_target = fm::parseDnnTarget(o.dnn_target);
-    fm::DetectorConfig model = stage.loadModel();
+    fm::DetectorModelConfig model = stage.loadModel();
     const double operating = o.score_threshold.value_or(model.score_threshold);
     model.score_threshold = float(std::min(operating, o.ap_threshold));
     fm::Detector det(model, stage.device());

@@ -1,4 +1,4 @@
-// map_tool: inspect, check and convert saved TSDF maps (the TsdfFusion
+// map_tool: inspect, check and convert saved TSDF maps (the Tsdf
 // nodelet's ~save_map / save_map_on_shutdown files) offline, through the same
 // validating loader the nodelet uses.
 //

@@ -81,7 +81,7 @@ const char* kUsage =
     "  --camchain F, --mount F  the rig (Kalibr camchain and mount)\n"
     "  --out DIR          mesh.ply, cloud.pcd, cloud_all.pcd, timings.md, timings.csv,\n"
     "                     vehicles.csv (with a detector: each vehicle's motion decision)\n"
-    "  --config YAML      sections sync, plane_sweep, detector, depth_mask, tsdf over the\n"
+    "  --config YAML      sections sync, depth, detector, depth_mask, tsdf over the\n"
     "                     stage defaults (as vehicle.launch's config:=)\n"
     "  --detector D       nanodet (default, as vehicle.launch), finetuned (the cache's\n"
     "                     models/finetuned/nanodet-fisheye.yaml, made by\n"
@@ -258,7 +258,7 @@ int main(int argc, char** argv) {
     const fm::Rig rig = fm::loadKalibrRig(camchain, mount);
     const YAML::Node config = config_path.empty() ? YAML::Node() : loadYaml(config_path);
     requireKnownConfig(config, config_path);
-    const fm::YamlParams sweep_p(stageParams(config_dir + "/plane_sweep_depth.yaml", config, "plane_sweep"), "plane_sweep");
+    const fm::YamlParams sweep_p(stageParams(config_dir + "/plane_sweep_depth.yaml", config, "depth"), "depth");
     const fm::YamlParams tsdf_p(stageParams(config_dir + "/tsdf_fusion.yaml", config, "tsdf"), "tsdf");
     const fm::YamlParams mask_p(stageParams("", config, "depth_mask"), "depth_mask");
     const fm::YamlParams det_p(stageParams("", config, "detector"), "detector");

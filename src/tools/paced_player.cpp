@@ -352,7 +352,7 @@ int main(int argc, char** argv) {
   ros::WallDuration(0.5).sleep();  // connections settle
 
   // ~publish_camera_info: a pipeline with rig_source camera_info builds its
-  // rig from the first CameraInfo of every camera and tf (FrameSync tries
+  // rig from the first CameraInfo of every camera and tf (Sync tries
   // every 0.5 s, then unsubscribes) and drops the frame sets before that,
   // which would leave the player waiting ~timeout for the first one. So the
   // bag's /tf_static and each camera's CameraInfo (the first image's stamp

@@ -96,7 +96,7 @@ fm::DepthStageConfig readConfig(const std::string& path, const std::vector<std::
   const fm::YamlParams yaml(y, path.empty() ? "--set" : path);
   // Every name the depth nodelet declares is known (the same file configures
   // it); anything else is an error naming the key and the known ones.
-  fm::nodeParamSet("plane_sweep").requireKnown(fm::yamlKeys(y), path.empty() ? "--set" : path);
+  fm::nodeParamSet("depth").requireKnown(fm::yamlKeys(y), path.empty() ? "--set" : path);
   return fm::DepthStageConfig::fromParams(yaml);
 }
 

@@ -50,7 +50,7 @@ struct DiagnosticOptions {
   static const ParamTable<DiagnosticOptions>& params();
 };
 
-// fisheye_mapping/FrameSync (its stage: FrameSyncConfig).
+// fisheye_mapping/Sync (its stage: FrameSyncConfig).
 struct FrameSyncNodeOptions {
   RigSourceOptions rig;
   std::string base_frame = "base_link";  // rig_source camera_info: tf parent of the cameras
@@ -60,7 +60,7 @@ struct FrameSyncNodeOptions {
   static const ParamTable<FrameSyncNodeOptions>& params();
 };
 
-// fisheye_mapping/PlaneSweepDepth (its stage: DepthStageConfig).
+// fisheye_mapping/Depth (its stage: DepthStageConfig).
 struct DepthNodeOptions {
   RigSourceOptions rig;
   std::string base_frame = "base_link";
@@ -91,7 +91,7 @@ struct DepthMaskNodeOptions {
   static const ParamTable<DepthMaskNodeOptions>& params();
 };
 
-// fisheye_mapping/TsdfFusion (its stage: TsdfConfig).
+// fisheye_mapping/Tsdf (its stage: TsdfConfig).
 struct TsdfNodeOptions {
   RigSourceOptions rig;
   std::string world_frame = "map";
@@ -111,7 +111,7 @@ struct TsdfNodeOptions {
   static const ParamTable<TsdfNodeOptions>& params();
 };
 
-// fisheye_mapping/RigTfPublisher.
+// fisheye_mapping/RigTf.
 struct RigTfNodeOptions {
   std::string camchain;
   std::string mount;

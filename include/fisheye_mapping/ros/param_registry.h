@@ -18,12 +18,12 @@ namespace fisheye_mapping {
 
 struct NodeParamSet {
   std::string section;       // node name in vehicle.launch = section of config/vehicle.yaml ("tsdf")
-  std::string nodelet;       // "fisheye_mapping/TsdfFusion"
+  std::string nodelet;       // "fisheye_mapping/Tsdf"
   std::string stage_struct;  // "TsdfConfig" (empty: no core stage)
   std::vector<ParamInfo> stage;
   std::string node_struct;   // "TsdfNodeOptions"
   std::vector<ParamInfo> node;
-  std::string cfg;           // "cfg/TsdfFusion.cfg" (empty: none)
+  std::string cfg;           // "cfg/TsdfReconfigure.cfg" (empty: none)
   // Reads every parameter of the node (stage and node options) from `p`
   // over the defaults and returns all their values by name; throws
   // std::invalid_argument naming a bad one.
@@ -35,7 +35,7 @@ struct NodeParamSet {
   void requireKnown(const std::vector<std::string>& keys, const std::string& origin) const;
 };
 
-// sync, plane_sweep, detector, depth_mask, tsdf, rig_tf.
+// sync, depth, detector, depth_mask, tsdf, rig_tf.
 const std::vector<NodeParamSet>& nodeParamSets();
 // Throws std::invalid_argument naming the section and the known ones.
 const NodeParamSet& nodeParamSet(const std::string& section);

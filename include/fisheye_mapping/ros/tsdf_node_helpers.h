@@ -1,5 +1,5 @@
-// Node-level policy of the TsdfFusion nodelet kept out of its class
-// (header-only, used by the TsdfFusion and PlaneSweepDepth nodelets): where
+// Node-level policy of the Tsdf nodelet kept out of its class
+// (header-only, used by the Tsdf and Depth nodelets): where
 // the save services write (the save folder) and SIGTERM handling.
 #ifndef FISHEYE_MAPPING_ROS_TSDF_NODE_HELPERS_H_
 #define FISHEYE_MAPPING_ROS_TSDF_NODE_HELPERS_H_
@@ -56,12 +56,12 @@ inline std::string inputPath(const std::string& path, const SaveFolder& folder) 
 
 // SIGTERM. roscpp installs a handler for SIGINT only; a SIGTERM (kill,
 // systemd, docker stop, roslaunch's escalation) ended a nodelet manager at
-// once, without unloading its nodelets: no map saved. While a TsdfFusion lives
+// once, without unloading its nodelets: no map saved. While a Tsdf lives
 // in the process and SIGTERM still has its default action, SIGTERM asks roscpp
 // to shut down exactly as its own SIGINT handler does (ros::requestShutdown
 // only sets a flag, which roscpp's poll thread acts on: async-signal-safe).
 // The manager then unloads its nodelets and their destructors save. The
-// last TsdfFusion to go puts the previous disposition back.
+// last Tsdf to go puts the previous disposition back.
 struct SigtermState {
   std::mutex mutex;
   int users = 0;

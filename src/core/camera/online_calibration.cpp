@@ -87,7 +87,7 @@ const ParamTable<SelfCalibrationConfig>& SelfCalibrationConfig::params() {
   using C = SelfCalibrationConfig;
   using R = ParamRange;
   static const ParamTable<C> t = [] {
-    ParamTable<C> t("plane_sweep");
+    ParamTable<C> t("depth");
     t.flag("self_calibration", [](C& c) -> bool& { return c.enabled; },
            "Keep each supporting camera's rotation relative to the reference right while driving (online "
            "self-calibration from feature matches)")

@@ -13,7 +13,7 @@ namespace fisheye_mapping {
 const ParamTable<DepthStageConfig>& DepthStageConfig::params() {
   using C = DepthStageConfig;
   static const ParamTable<C> t = [] {
-    ParamTable<C> t("plane_sweep");
+    ParamTable<C> t("depth");
     t.text("reference_camera", [](C& c) -> std::string& { return c.reference_camera; },
            "Camera whose depth is computed")
         .names("support_cameras", [](C& c) -> std::vector<std::string>& { return c.support_cameras; },

@@ -69,7 +69,7 @@ const ParamTable<DepthFilterConfig>& DepthFilterConfig::params() {
   using R = ParamRange;
   constexpr auto kRun = ParamChange::Runtime;
   static const ParamTable<C> t = [] {
-    ParamTable<C> t("plane_sweep filters");
+    ParamTable<C> t("depth filters");
     t.flag("filter_texture", [](C& c) -> bool& { return c.texture; },
            "Drop pixels whose reference window has too little texture for the image's noise (sky, blank walls)", kRun)
         .number("min_texture_snr", [](C& c) -> double& { return c.min_texture_snr; }, R::atLeast(0), "",
@@ -117,7 +117,7 @@ const ParamTable<PlaneSweepConfig>& PlaneSweepConfig::params() {
   using R = ParamRange;
   constexpr auto kRun = ParamChange::Runtime;
   static const ParamTable<C> t = [] {
-    ParamTable<C> t("plane_sweep");
+    ParamTable<C> t("depth");
     t.number("fronto_planes", [](C& c) -> int& { return c.fronto_planes; }, R::atLeast(2), "",
              "Planes parallel to the reference image plane, uniform in inverse depth over [near, far]")
         .number("near", [](C& c) -> double& { return c.near; }, R::above(0), "m",

@@ -94,7 +94,7 @@ DetectorHead parseHead(const std::string& name) {
   throw std::runtime_error("unknown head '" + name + "' (darknet, yolov5, yolov8, nanodet)");
 }
 
-DetectorConfig loadDetectorConfig(const std::string& yaml_path) {
+DetectorModelConfig loadDetectorConfig(const std::string& yaml_path) {
   YAML::Node root;
   const std::string text = readRegularFile(yaml_path, kMaxCalibrationFileBytes, "detector model config");
   try {
@@ -111,7 +111,7 @@ DetectorConfig loadDetectorConfig(const std::string& yaml_path) {
     std::string e = expandPath(p);
     return (!e.empty() && e[0] != '/') ? base + "/" + e : e;
   };
-  DetectorConfig c;
+  DetectorModelConfig c;
   try {
     const auto req = [&](const char* key) {
       if (!root[key]) throw fail(key, "is missing");
@@ -248,11 +248,11 @@ DetectorStageConfig DetectorStageConfig::fromParams(const ParamSource& p, Detect
 
 DnnDevice DetectorStageConfig::device() const { return DnnDevice{toString(dnn_backend), toString(dnn_target)}; }
 
-DetectorConfig DetectorStageConfig::loadModel() const {
+DetectorModelConfig DetectorStageConfig::loadModel() const {
   if (model_config.empty())
     throw std::runtime_error("model_config (path of a model YAML, see config/detector/) is not set");
   validate();
-  DetectorConfig c = loadDetectorConfig(model_config);
+  DetectorModelConfig c = loadDetectorConfig(model_config);
   if (score_threshold) c.score_threshold = *score_threshold;
   if (nms_threshold) c.nms_threshold = *nms_threshold;
   return c;
@@ -274,7 +274,7 @@ Letterbox Letterbox::compute(int iw, int ih, int nw, int nh, bool keep_aspect) {
   return lb;
 }
 
-cv::Mat makeInputBlob(const cv::Mat& image, const DetectorConfig& cfg, Letterbox* lb_out) {
+cv::Mat makeInputBlob(const cv::Mat& image, const DetectorModelConfig& cfg, Letterbox* lb_out) {
   if (image.empty()) throw std::invalid_argument("detector: empty image");
   if (image.depth() != CV_8U || (image.channels() != 1 && image.channels() != 3 && image.channels() != 4))
     throw std::invalid_argument("detector: image must be 8-bit grey, BGR or BGRA (got type " +
@@ -328,7 +328,7 @@ std::string shapeOf(const cv::Mat& m) {
 
 }  // namespace
 
-std::vector<Candidate> decodeDarknet(const std::vector<cv::Mat>& outs, const DetectorConfig& cfg) {
+std::vector<Candidate> decodeDarknet(const std::vector<cv::Mat>& outs, const DetectorModelConfig& cfg) {
   const int nc = int(cfg.class_names.size());
   std::vector<Candidate> c;
   for (const auto& o : outs) {
@@ -350,7 +350,7 @@ std::vector<Candidate> decodeDarknet(const std::vector<cv::Mat>& outs, const Det
   return c;
 }
 
-std::vector<Candidate> decodeYoloV5(const std::vector<cv::Mat>& outs, const DetectorConfig& cfg) {
+std::vector<Candidate> decodeYoloV5(const std::vector<cv::Mat>& outs, const DetectorModelConfig& cfg) {
   const int nc = int(cfg.class_names.size());
   if (outs.size() != 1) throw std::runtime_error("yolov5 head: expected 1 output, got " + std::to_string(outs.size()));
   const cv::Mat m = as2d(outs[0], "yolov5");
@@ -371,7 +371,7 @@ std::vector<Candidate> decodeYoloV5(const std::vector<cv::Mat>& outs, const Dete
   return c;
 }
 
-std::vector<Candidate> decodeYoloV8(const std::vector<cv::Mat>& outs, const DetectorConfig& cfg) {
+std::vector<Candidate> decodeYoloV8(const std::vector<cv::Mat>& outs, const DetectorModelConfig& cfg) {
   const int nc = int(cfg.class_names.size());
   if (outs.size() != 1) throw std::runtime_error("yolov8 head: expected 1 output, got " + std::to_string(outs.size()));
   cv::Mat m = as2d(outs[0], "yolov8");
@@ -391,7 +391,7 @@ std::vector<Candidate> decodeYoloV8(const std::vector<cv::Mat>& outs, const Dete
   return c;
 }
 
-std::vector<Candidate> decodeNanoDet(const std::vector<cv::Mat>& outs, const DetectorConfig& cfg) {
+std::vector<Candidate> decodeNanoDet(const std::vector<cv::Mat>& outs, const DetectorModelConfig& cfg) {
   const int nc = int(cfg.class_names.size());
   const int bins = cfg.reg_max + 1, nreg = 4 * bins;
   struct Level {
@@ -461,7 +461,7 @@ std::vector<Candidate> decodeNanoDet(const std::vector<cv::Mat>& outs, const Det
   return c;
 }
 
-std::vector<Candidate> decodeHead(const std::vector<cv::Mat>& outs, const DetectorConfig& cfg) {
+std::vector<Candidate> decodeHead(const std::vector<cv::Mat>& outs, const DetectorModelConfig& cfg) {
   switch (cfg.head) {
     case DetectorHead::Darknet: return decodeDarknet(outs, cfg);
     case DetectorHead::YoloV5: return decodeYoloV5(outs, cfg);
@@ -520,7 +520,7 @@ float boxIoU(const Detection& a, const Detection& b) {
 }
 
 std::vector<Detection> toDetections(const std::vector<Candidate>& cands, const Letterbox& lb,
-                                    const DetectorConfig& cfg, int iw, int ih, bool only_moving) {
+                                    const DetectorModelConfig& cfg, int iw, int ih, bool only_moving) {
   std::vector<Detection> out;
   for (const auto& c : cands) {
     if (c.class_id < 0 || c.class_id >= int(cfg.class_names.size())) continue;
@@ -564,7 +564,7 @@ struct Detector::Impl {
   std::vector<std::string> out_names;
 };
 
-Detector::Detector(const DetectorConfig& cfg, const DnnDevice& device) : cfg_(cfg), impl_(new Impl) {
+Detector::Detector(const DetectorModelConfig& cfg, const DnnDevice& device) : cfg_(cfg), impl_(new Impl) {
   if (const std::string why = modelFileProblem(cfg.model_path); !why.empty())
     throw std::runtime_error("detector: model file " + cfg.model_path + " does not exist or cannot be read: " + why +
                              (cfg.format == ModelFormat::Onnx ? " (scripts/setup makes the NanoDet model)" : ""));

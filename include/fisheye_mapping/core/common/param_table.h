@@ -105,7 +105,7 @@ class ParamTable {
     Read read;
   };
 
-  // `section` names the table in messages and docs ("tsdf", "plane_sweep").
+  // `section` names the table in messages and docs ("tsdf", "depth").
   explicit ParamTable(std::string section) : section_(std::move(section)) {}
 
   // ---- declarations (fields reached through an accessor) ----

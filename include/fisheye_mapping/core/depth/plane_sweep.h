@@ -105,7 +105,7 @@ struct DepthFilterConfig {
   // `base` overlaid with the parameters filter_texture, min_texture_snr,
   // min_noise_std, filter_cost, alpha_upper, alpha_lower, split_row,
   // filter_uniqueness, max_ratio, filter_consistency, consistency_window,
-  // gamma and delta (the names of cfg/PlaneSweepFilters.cfg, which the
+  // gamma and delta (the names of cfg/DepthReconfigure.cfg, which the
   // reconfigure callback passes through here too); validated.
   static DepthFilterConfig fromParams(const ParamSource& p, DepthFilterConfig base);
   static DepthFilterConfig fromParams(const ParamSource& p) { return fromParams(p, DepthFilterConfig()); }
@@ -193,7 +193,7 @@ struct PlaneSweepConfig {
   // (docs/parameters.md). band_rows is not a parameter.
   static const ParamTable<PlaneSweepConfig>& params();
   // The defaults above overlaid with the parameters of the same names in `p`
-  // (filters under the names of cfg/PlaneSweepFilters.cfg; the enumerations
+  // (filters under the names of cfg/DepthReconfigure.cfg; the enumerations
   // as their strings, parsed here); validated. band_rows is not a parameter.
   static PlaneSweepConfig fromParams(const ParamSource& p);
   // The same over `base` instead of the defaults (a dynamic_reconfigure

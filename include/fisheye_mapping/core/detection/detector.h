@@ -38,7 +38,7 @@ enum class ModelFormat { Darknet, Onnx };
 ///          [1, N_s, 4 * (reg_max + 1)], or both concatenated in one [1, sum N_s, C + 4 * (reg_max + 1)].
 enum class DetectorHead { Darknet, YoloV5, YoloV8, NanoDet };
 
-struct DetectorConfig {
+struct DetectorModelConfig {
   ModelFormat format = ModelFormat::Onnx;
   std::string model_path;    ///< .onnx, or the Darknet .weights
   std::string darknet_cfg;   ///< Darknet .cfg (format darknet only)
@@ -70,7 +70,7 @@ struct DetectorConfig {
 /// `${VAR}` and `${VAR:-default}` are expanded. Throws std::runtime_error naming
 /// the file and the key for anything missing or malformed (among them
 /// score_threshold outside (0, 1) and nms_threshold outside (0, 1]).
-DetectorConfig loadDetectorConfig(const std::string& yaml_path);
+DetectorModelConfig loadDetectorConfig(const std::string& yaml_path);
 
 /// Expands a leading `~`, `${VAR}` and `${VAR:-default}` (nested defaults allowed).
 std::string expandPath(const std::string& path);
@@ -89,7 +89,7 @@ struct Letterbox {
 
 /// Converts mono8 / bgr8 / bgra8 to the normalised NCHW float blob the network takes.
 /// Throws std::invalid_argument for an empty image or an unsupported type.
-cv::Mat makeInputBlob(const cv::Mat& image, const DetectorConfig& cfg, Letterbox* lb);
+cv::Mat makeInputBlob(const cv::Mat& image, const DetectorModelConfig& cfg, Letterbox* lb);
 
 /// A candidate before suppression: box in network-input pixels.
 struct Candidate {
@@ -100,11 +100,11 @@ struct Candidate {
 
 /// Head decoders: network outputs -> candidates above cfg.score_threshold (best class per anchor).
 /// They throw std::runtime_error when the outputs do not have the head's layout.
-std::vector<Candidate> decodeDarknet(const std::vector<cv::Mat>& outs, const DetectorConfig& cfg);
-std::vector<Candidate> decodeYoloV5(const std::vector<cv::Mat>& outs, const DetectorConfig& cfg);
-std::vector<Candidate> decodeYoloV8(const std::vector<cv::Mat>& outs, const DetectorConfig& cfg);
-std::vector<Candidate> decodeNanoDet(const std::vector<cv::Mat>& outs, const DetectorConfig& cfg);
-std::vector<Candidate> decodeHead(const std::vector<cv::Mat>& outs, const DetectorConfig& cfg);
+std::vector<Candidate> decodeDarknet(const std::vector<cv::Mat>& outs, const DetectorModelConfig& cfg);
+std::vector<Candidate> decodeYoloV5(const std::vector<cv::Mat>& outs, const DetectorModelConfig& cfg);
+std::vector<Candidate> decodeYoloV8(const std::vector<cv::Mat>& outs, const DetectorModelConfig& cfg);
+std::vector<Candidate> decodeNanoDet(const std::vector<cv::Mat>& outs, const DetectorModelConfig& cfg);
+std::vector<Candidate> decodeHead(const std::vector<cv::Mat>& outs, const DetectorModelConfig& cfg);
 
 /// Non-maximum suppression within each class (different classes never suppress each other).
 std::vector<Candidate> nmsPerClass(const std::vector<Candidate>& cands, float iou_threshold);
@@ -118,7 +118,7 @@ float boxIoU(const Detection& a, const Detection& b);
 /// Candidates (input pixels) -> detections in image pixels, clipped to the image; keeps only
 /// moving classes when `only_moving` (class names from cfg).
 std::vector<Detection> toDetections(const std::vector<Candidate>& cands, const Letterbox& lb,
-                                    const DetectorConfig& cfg, int image_w, int image_h,
+                                    const DetectorModelConfig& cfg, int image_w, int image_h,
                                     bool only_moving);
 
 /// Draws boxes with class name and score on a BGR copy of `image`.
@@ -173,28 +173,28 @@ struct DetectorStageConfig {
   DnnDevice device() const;
   /// The model YAML (loadDetectorConfig) with the thresholds overridden.
   /// Throws std::runtime_error when model_config is empty or the YAML is bad.
-  DetectorConfig loadModel() const;
+  DetectorModelConfig loadModel() const;
 };
 
 class Detector {
  public:
   /// Loads the network; throws std::runtime_error with the path and OpenCV's reason when the
   /// model file is missing or cannot be parsed.
-  Detector(const DetectorConfig& cfg, const DnnDevice& device = DnnDevice());
+  Detector(const DetectorModelConfig& cfg, const DnnDevice& device = DnnDevice());
   ~Detector();
   Detector(const Detector&) = delete;
   Detector& operator=(const Detector&) = delete;
 
   /// Detections in image pixels. `only_moving`: keep the config's moving classes only.
   std::vector<Detection> detect(const cv::Mat& image, bool only_moving = true);
-  const DetectorConfig& config() const { return cfg_; }
+  const DetectorModelConfig& config() const { return cfg_; }
   /// New score / NMS thresholds for the next detect() (the network stays).
   /// Throws std::invalid_argument naming the field unless score_threshold is
   /// in (0, 1) and nms_threshold in (0, 1].
   void setThresholds(float score_threshold, float nms_threshold);
 
  private:
-  DetectorConfig cfg_;
+  DetectorModelConfig cfg_;
   struct Impl;
   std::unique_ptr<Impl> impl_;
   std::vector<cv::Mat> outs_;

@@ -37,7 +37,7 @@ struct FrameSetMapperConfig {
   int mesh_every = 10;
   void validate() const;
   // Each stage from its own parameters (the sections of the nodelets'
-  // parameters: plane_sweep, detector, depth_mask, tsdf); validated.
+  // parameters: depth, detector, depth_mask, tsdf); validated.
   static FrameSetMapperConfig fromParams(const ParamSource& depth, const ParamSource& detection,
                                          const ParamSource& mask, const ParamSource& tsdf);
 };

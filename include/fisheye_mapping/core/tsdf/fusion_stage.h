@@ -1,4 +1,4 @@
-// The TSDF stage without ROS: what the TsdfFusion nodelet runs between its
+// The TSDF stage without ROS: what the Tsdf nodelet runs between its
 // topics, and what a tool or a test can run alone.
 //   - The map (TsdfMap), its mesh (TsdfMesher) and its file (MapSession:
 //     save on shutdown, the .1 backup, reload, autosave, change counting).

@@ -16,7 +16,7 @@
 // Services    ~save_mesh, ~save_cloud, ~save_map, ~load_map (FilePath, confined to
 //             ~save_directory: core/common/safe_write.h), ~clear_map (Trigger).
 // Parameters  docs/parameters.md (TsdfConfig, TsdfNodeOptions); max_range,
-//             min_observations, publish_period also at run time (cfg/TsdfFusion.cfg).
+//             min_observations, publish_period also at run time (cfg/TsdfReconfigure.cfg).
 // Nothing the user built is lost: exceptions in callbacks are caught, logged
 // with the frame stamp and counted; SIGTERM saves like SIGINT; the map file's
 // policy (backup, reload, autosave) is the core's MapSession.
@@ -35,7 +35,7 @@
 #include <tf2_ros/transform_listener.h>
 
 #include "fisheye_mapping/FrameDone.h"
-#include "fisheye_mapping/TsdfFusionConfig.h"
+#include "fisheye_mapping/TsdfReconfigureConfig.h"
 #include "fisheye_mapping/core/tsdf/fusion_stage.h"
 #include "fisheye_mapping/ros/camera_models.h"
 #include "fisheye_mapping/ros/conversions.h"
@@ -49,9 +49,9 @@
 
 namespace fisheye_mapping {
 
-class TsdfFusionNodelet : public nodelet::Nodelet {
+class TsdfNodelet : public nodelet::Nodelet {
  public:
-  ~TsdfFusionNodelet() override {
+  ~TsdfNodelet() override {
     for (ros::WallTimer* t : {&autosave_timer_, &timer_, &occupancy_timer_, &hold_timer_}) t->stop();
     std::lock_guard<std::mutex> lock(mutex_);
     if (stage_) stage_->shutdown();
@@ -108,14 +108,14 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     tf_buffer_ = std::make_unique<tf2_ros::Buffer>(ros::Duration(30.0));
     tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_, nh);
     if (opts_.rig.fromCameraInfo()) {
-      info_sub_ = nh.subscribe("depth_masked/camera_info", 10, &TsdfFusionNodelet::onCameraInfo, this);
+      info_sub_ = nh.subscribe("depth_masked/camera_info", 10, &TsdfNodelet::onCameraInfo, this);
       // Frames that waited too long are dropped, "no camera_info yet".
       hold_timer_ = nh.createWallTimer(ros::WallDuration(0.25), [this](const ros::WallTimerEvent&) { images_->expire(); });
     }
-    vehicles_sub_ = nh.subscribe("depth_masked/vehicles", 5, &TsdfFusionNodelet::onVehicles, this);
+    vehicles_sub_ = nh.subscribe("depth_masked/vehicles", 5, &TsdfNodelet::onVehicles, this);
     if (opts_.intensity) {
       it_ = std::make_unique<image_transport::ImageTransport>(nh);
-      image_sub_ = it_->subscribe("image", 4, &TsdfFusionNodelet::onImage, this);
+      image_sub_ = it_->subscribe("image", 4, &TsdfNodelet::onImage, this);
     }
     depth_sub_.subscribe(nh, "depth_masked/image", opts_.queue_size);
     depth_sub_.registerCallback([this](const ImagePtr&) { monitor_->input(); });
@@ -131,23 +131,23 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
     cloud_pub_ = nh.advertise<sensor_msgs::PointCloud2>("tsdf/cloud", 2, true);
     occupancy_pub_ = nh.advertise<nav_msgs::OccupancyGrid>("tsdf/occupancy", 1, true);
     done_pub_ = nh.advertise<fisheye_mapping::FrameDone>("tsdf/fusion_done", 100);
-    auto every = [&](double period, const char* what, void (TsdfFusionNodelet::*fn)()) {
+    auto every = [&](double period, const char* what, void (TsdfNodelet::*fn)()) {
       return nh.createWallTimer(ros::WallDuration(period), [this, what, fn](const ros::WallTimerEvent&) {
         guarded(timer_errors_, what, [&] { (this->*fn)(); });
       });
     };
-    if (opts_.occupancy_period > 0) occupancy_timer_ = every(opts_.occupancy_period, "occupancy timer", &TsdfFusionNodelet::publishOccupancy);
-    timer_ = every(opts_.publish_period, "publish timer", &TsdfFusionNodelet::publish);
+    if (opts_.occupancy_period > 0) occupancy_timer_ = every(opts_.occupancy_period, "occupancy timer", &TsdfNodelet::publishOccupancy);
+    timer_ = every(opts_.publish_period, "publish timer", &TsdfNodelet::publish);
     if (opts_.autosave_period > 0.0 && !stage_->persistent()) {
       NODELET_WARN("~autosave_period %.1f s ignored: ~save_map_on_shutdown is not set", opts_.autosave_period);
     } else if (opts_.autosave_period > 0.0) {
-      autosave_timer_ = every(opts_.autosave_period, "autosave timer", &TsdfFusionNodelet::autosave);
+      autosave_timer_ = every(opts_.autosave_period, "autosave timer", &TsdfNodelet::autosave);
     }
     advertiseServices(pnh);
     monitor_->setExtraReport([this](diagnostic_updater::DiagnosticStatusWrapper& stat) { diagnose(stat); });
     // After the timer exists: the first callback (the start-up values) may set its period.
-    reconfigure_ = std::make_unique<dynamic_reconfigure::Server<TsdfFusionConfig>>(reconfigure_mutex_, pnh);
-    reconfigure_->setCallback([this](TsdfFusionConfig& c, uint32_t) {
+    reconfigure_ = std::make_unique<dynamic_reconfigure::Server<TsdfReconfigureConfig>>(reconfigure_mutex_, pnh);
+    reconfigure_->setCallback([this](TsdfReconfigureConfig& c, uint32_t) {
       guarded(service_errors_, "reconfigure", [&] { onReconfigure(c); });
     });
     NODELET_INFO("TSDF fusion: voxel %.3f m, truncation %.3f m, local map %.0fx%.0fx%.0f m, %s integrator",
@@ -157,7 +157,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
 
   // A value outside its declared range is refused: the running values stay
   // and are reported back. Only what applies without a new map is run-time.
-  void onReconfigure(TsdfFusionConfig& c) {
+  void onReconfigure(TsdfReconfigureConfig& c) {
     dynamic_reconfigure::Config values;
     c.__toMessage__(values);
     std::lock_guard<std::mutex> lock(mutex_);
@@ -470,7 +470,7 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
   std::unique_ptr<StageMonitor> monitor_;
   std::unique_ptr<MeshMarkerStream> mesh_markers_;
   boost::recursive_mutex reconfigure_mutex_;
-  std::unique_ptr<dynamic_reconfigure::Server<TsdfFusionConfig>> reconfigure_;
+  std::unique_ptr<dynamic_reconfigure::Server<TsdfReconfigureConfig>> reconfigure_;
   bool sigterm_acquired_ = false;
   ros::Time last_stamp_seen_;  // of the last depth frame received (for error logs)
   // Exceptions caught per kind of callback.
@@ -479,4 +479,4 @@ class TsdfFusionNodelet : public nodelet::Nodelet {
 
 }  // namespace fisheye_mapping
 
-PLUGINLIB_EXPORT_CLASS(fisheye_mapping::TsdfFusionNodelet, nodelet::Nodelet)
+PLUGINLIB_EXPORT_CLASS(fisheye_mapping::TsdfNodelet, nodelet::Nodelet)

@@ -2,7 +2,7 @@
 // on /tf_static, from the calibration files named by ~camchain and ~mount.
 // For logged drives whose bags lack /tf_static, and for live rigs.
 // Any error (a malformed calibration, a failed publish) is logged and reported
-// on /diagnostics (StageMonitor "camera mounts": ERROR naming the error,
+// on /diagnostics (StageMonitor "rig_tf": ERROR naming the error,
 // "mounts published", "base frame"; input = the calibration read, output = the
 // mounts sent); the nodelet stays loaded so that the manager and its other
 // nodelets keep running.
@@ -23,11 +23,11 @@
 
 namespace fisheye_mapping {
 
-class RigTfPublisherNodelet : public nodelet::Nodelet {
+class RigTfNodelet : public nodelet::Nodelet {
  private:
   void onInit() override {
     try {
-      monitor_ = std::make_unique<StageMonitor>(getNodeHandle(), getPrivateNodeHandle(), "camera mounts");
+      monitor_ = std::make_unique<StageMonitor>(getNodeHandle(), getPrivateNodeHandle(), "rig_tf");
       monitor_->setInputExpected(false);  // one calibration at start-up, then silence
       monitor_->setExtraReport([this](diagnostic_updater::DiagnosticStatusWrapper& stat) { report(stat); });
     } catch (const std::exception& e) {
@@ -84,4 +84,4 @@ class RigTfPublisherNodelet : public nodelet::Nodelet {
 
 }  // namespace fisheye_mapping
 
-PLUGINLIB_EXPORT_CLASS(fisheye_mapping::RigTfPublisherNodelet, nodelet::Nodelet)
+PLUGINLIB_EXPORT_CLASS(fisheye_mapping::RigTfNodelet, nodelet::Nodelet)

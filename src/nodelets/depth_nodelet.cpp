@@ -39,7 +39,7 @@
 //             plane-sweep parameters (see config/plane_sweep_depth.yaml);
 //             filter thresholds and near / far / ground_height / ground_min /
 //             ground_max / wall_min / wall_max / min_parallax_* / min_overlap also through
-//             dynamic_reconfigure (cfg/PlaneSweepFilters.cfg; the latter
+//             dynamic_reconfigure (cfg/DepthReconfigure.cfg; the latter
 //             rebuild the sweep), ~time_reset_threshold (s, default 1; 0: never),
 //             ~self_calibration* (the online rotation self-calibration, on by
 //             default: core/camera/online_calibration.h), ~self_calibration_file.
@@ -72,7 +72,7 @@
 #include "fisheye_mapping/CameraFrameSet.h"
 #include "fisheye_mapping/FilePath.h"
 #include "fisheye_mapping/RigSelfCalibration.h"
-#include "fisheye_mapping/PlaneSweepFiltersConfig.h"
+#include "fisheye_mapping/DepthReconfigureConfig.h"
 #include "fisheye_mapping/core/depth/depth_image.h"
 #include "fisheye_mapping/core/depth/depth_stage.h"
 #include "fisheye_mapping/core/depth/plane_sweep.h"
@@ -86,9 +86,9 @@
 
 namespace fisheye_mapping {
 
-class PlaneSweepDepthNodelet : public nodelet::Nodelet {
+class DepthNodelet : public nodelet::Nodelet {
  public:
-  ~PlaneSweepDepthNodelet() override {
+  ~DepthNodelet() override {
     {
       std::lock_guard<std::mutex> lock(mailbox_mutex_);
       stopping_ = true;
@@ -109,7 +109,7 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
   }
 
  private:
-  // cfg/PlaneSweepFilters.cfg's level bit of the parameters that rebuild the sweep.
+  // cfg/DepthReconfigure.cfg's level bit of the parameters that rebuild the sweep.
   static constexpr uint32_t kSweepLevel = 1;
 
   void onInit() override {
@@ -150,9 +150,9 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
     timeline_ = std::make_unique<StreamTimeline>(1, time_reset);
     monitor_->setExtraReport([this](diagnostic_updater::DiagnosticStatusWrapper& stat) { report(stat); });
     clock_timer_ = nh.createWallTimer(ros::WallDuration(0.2), [this](const ros::WallTimerEvent&) { checkClock(); });
-    reconfigure_ = std::make_unique<dynamic_reconfigure::Server<PlaneSweepFiltersConfig>>(reconfigure_mutex_, pnh);
-    reconfigure_->setCallback([this](PlaneSweepFiltersConfig& c, uint32_t level) { onReconfigure(c, level); });
-    save_service_ = pnh.advertiseService("save_calibration", &PlaneSweepDepthNodelet::saveCalibration, this);
+    reconfigure_ = std::make_unique<dynamic_reconfigure::Server<DepthReconfigureConfig>>(reconfigure_mutex_, pnh);
+    reconfigure_->setCallback([this](DepthReconfigureConfig& c, uint32_t level) { onReconfigure(c, level); });
+    save_service_ = pnh.advertiseService("save_calibration", &DepthNodelet::saveCalibration, this);
     worker_ = std::thread([this] { work(); });
     advertise(nh);
   }
@@ -292,13 +292,13 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
     updateSubscription();
   }
 
-  // The run-time parameters of PlaneSweepConfig::params() (cfg/PlaneSweepFilters.cfg
+  // The run-time parameters of PlaneSweepConfig::params() (cfg/DepthReconfigure.cfg
   // is checked against them by test_param_declarations), each against its
   // declaration: a value outside its range is refused, the running values stay
   // and are reported back. Filters change in place; the planes and view
   // thresholds (level kSweepLevel) rebuild the sweep, except on the first call:
   // its values are the start-up parameters the stage was built from.
-  void onReconfigure(PlaneSweepFiltersConfig& c, uint32_t level) {
+  void onReconfigure(DepthReconfigureConfig& c, uint32_t level) {
     dynamic_reconfigure::Config values;
     c.__toMessage__(values);
     std::lock_guard<std::mutex> lock(mutex_);
@@ -333,7 +333,7 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
                         (publish_uniqueness_ && uniqueness_pub_.getNumSubscribers() > 0);
     try {
       if (wanted && !sub_) {
-        sub_ = getNodeHandle().subscribe("frames", 2, &PlaneSweepDepthNodelet::onFrames, this);
+        sub_ = getNodeHandle().subscribe("frames", 2, &DepthNodelet::onFrames, this);
       } else if (!wanted && sub_) {
         sub_.shutdown();
       }
@@ -504,7 +504,7 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
   RigSelfCalibration calibration_;  // views_mutex_: the last state, for the diagnostics
   std::mutex mutex_, connect_mutex_;  // mutex_: the stage (worker, reconfigure)
   boost::recursive_mutex reconfigure_mutex_;
-  std::unique_ptr<dynamic_reconfigure::Server<PlaneSweepFiltersConfig>> reconfigure_;
+  std::unique_ptr<dynamic_reconfigure::Server<DepthReconfigureConfig>> reconfigure_;
   ros::Subscriber sub_;
   std::unique_ptr<image_transport::ImageTransport> it_;
   image_transport::CameraPublisher depth_pub_;
@@ -525,4 +525,4 @@ class PlaneSweepDepthNodelet : public nodelet::Nodelet {
 
 }  // namespace fisheye_mapping
 
-PLUGINLIB_EXPORT_CLASS(fisheye_mapping::PlaneSweepDepthNodelet, nodelet::Nodelet)
+PLUGINLIB_EXPORT_CLASS(fisheye_mapping::DepthNodelet, nodelet::Nodelet)

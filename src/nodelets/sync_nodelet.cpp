@@ -11,7 +11,7 @@
 // Publishes   frames (fisheye_mapping/CameraFrameSet): header = the reference
 //             (first) camera's image header; images and camera_infos (the
 //             rig's calibration, each with its image's header) in camera order.
-//             /diagnostics (StageMonitor "frame sets"): input = images, output
+//             /diagnostics (StageMonitor "sync"): input = images, output
 //             = sets; per-camera rates, a silent camera (ERROR naming it), bad
 //             images, sets out, incomplete / out-of-order / stale drops, mean
 //             latency, time resets and callback errors, tf failures.
@@ -23,7 +23,7 @@
 //             ~queue_size (open sets), ~silent_warning (s of ROS time - sim
 //             time under a bag - without an image before a camera is
 //             reported), ~time_reset_threshold (s, default 1; 0: never reset).
-//             The last five also through dynamic_reconfigure (cfg/FrameSyncReconfigure.cfg):
+//             The last five also through dynamic_reconfigure (cfg/SyncReconfigure.cfg):
 //             a change rebuilds the sync (its open sets are dropped).
 // Time going backwards (a bag played again, rosbag play restarted, a sim clock
 // reset): an image older than its camera's newest by more than the threshold,
@@ -49,7 +49,7 @@
 #include "fisheye_mapping/CameraFrameSet.h"
 #include "fisheye_mapping/core/sync/frame_sync.h"
 
-#include "fisheye_mapping/FrameSyncReconfigureConfig.h"
+#include "fisheye_mapping/SyncReconfigureConfig.h"
 #include "fisheye_mapping/ros/camera_info.h"
 #include "fisheye_mapping/ros/conversions.h"
 #include "fisheye_mapping/ros/node_options.h"
@@ -68,9 +68,9 @@ std::string cameraInfoTopic(const std::string& image_topic) {
 
 }  // namespace
 
-class FrameSyncNodelet : public nodelet::Nodelet {
+class SyncNodelet : public nodelet::Nodelet {
   using Sync = FrameSetSync<sensor_msgs::ImageConstPtr>;
-  using FrameSyncReconfigure = FrameSyncReconfigureConfig;  // the generated class
+  using SyncReconfigure = SyncReconfigureConfig;  // the generated class
 
  private:
   void onInit() override {
@@ -85,7 +85,7 @@ class FrameSyncNodelet : public nodelet::Nodelet {
       transport_ = opts_.image_transport;
       initRigSource(pnh);
       sync_ = makeSync(cfg_);
-      monitor_ = std::make_unique<StageMonitor>(nh, pnh, "frame sets");
+      monitor_ = std::make_unique<StageMonitor>(nh, pnh, "sync");
     } catch (const std::exception& e) {
       NODELET_FATAL("frame sync not started: %s", e.what());
       return;
@@ -100,8 +100,8 @@ class FrameSyncNodelet : public nodelet::Nodelet {
     // assigned may have run the connect callback too early (it saw none):
     // look once more now that all of them exist.
     updateSubscription();
-    reconfigure_ = std::make_unique<dynamic_reconfigure::Server<FrameSyncReconfigure>>(reconfigure_mutex_, pnh);
-    reconfigure_->setCallback([this](FrameSyncReconfigure& c, uint32_t) { onReconfigure(c); });
+    reconfigure_ = std::make_unique<dynamic_reconfigure::Server<SyncReconfigure>>(reconfigure_mutex_, pnh);
+    reconfigure_->setCallback([this](SyncReconfigure& c, uint32_t) { onReconfigure(c); });
     clock_timer_ = nh.createWallTimer(ros::WallDuration(0.2), [this](const ros::WallTimerEvent&) { checkClock(); });
     std::string list;
     for (const auto& t : topics_) list += " " + t;
@@ -193,7 +193,7 @@ class FrameSyncNodelet : public nodelet::Nodelet {
   // The run-time parameters of FrameSyncConfig::params(), each against its
   // declaration (a refused value keeps the running ones and reports them
   // back); the sync is rebuilt, its open sets counted as dropped.
-  void onReconfigure(FrameSyncReconfigure& c) {
+  void onReconfigure(SyncReconfigure& c) {
     dynamic_reconfigure::Config values;
     c.__toMessage__(values);
     std::lock_guard<std::mutex> lock(mutex_);
@@ -244,7 +244,7 @@ class FrameSyncNodelet : public nodelet::Nodelet {
           continue;
         }
         subs_.push_back(it_->subscribe(topics_[i], 5,
-                                       boost::bind(&FrameSyncNodelet::onImage, this, boost::placeholders::_1, int(i)),
+                                       boost::bind(&SyncNodelet::onImage, this, boost::placeholders::_1, int(i)),
                                        ros::VoidPtr(), image_transport::TransportHints(transport_)));
       }
       std::lock_guard<std::mutex> lock(mutex_);
@@ -449,7 +449,7 @@ class FrameSyncNodelet : public nodelet::Nodelet {
   ros::Publisher pub_;
   std::unique_ptr<StageMonitor> monitor_;
   boost::recursive_mutex reconfigure_mutex_;
-  std::unique_ptr<dynamic_reconfigure::Server<FrameSyncReconfigure>> reconfigure_;
+  std::unique_ptr<dynamic_reconfigure::Server<SyncReconfigure>> reconfigure_;
   ros::WallTimer clock_timer_, rig_timer_;
   ros::Time started_;
   double latency_sum_ = 0;
@@ -458,4 +458,4 @@ class FrameSyncNodelet : public nodelet::Nodelet {
 
 }  // namespace fisheye_mapping
 
-PLUGINLIB_EXPORT_CLASS(fisheye_mapping::FrameSyncNodelet, nodelet::Nodelet)
+PLUGINLIB_EXPORT_CLASS(fisheye_mapping::SyncNodelet, nodelet::Nodelet)
