@@ -101,3 +101,8 @@ fm_add_test(test_own_rig_node ROSTEST test/launch/own_rig.test SOURCES test/test
 fm_add_test(test_detector_eval SOURCES test/test_detector_eval.cpp DEPENDS detector_eval)
 fm_add_test(test_launch_files SOURCES test/test_launch_files.cpp INCLUDES ${PROJECT_SOURCE_DIR}/test)
 include(${CMAKE_CURRENT_LIST_DIR}/ros_tools.cmake)
+# Issue 29: the nodelets' ROS-free bookkeeping and their shared glue.
+fm_add_test(test_latest_worker SOURCES test/test_latest_worker.cpp)
+fm_add_test(test_sync_report SOURCES test/test_sync_report.cpp)
+fm_add_test(test_mask_decisions SOURCES test/test_mask_decisions.cpp)
+fm_add_test(test_nodelet_glue SOURCES test/test_nodelet_glue.cpp LIBS fisheye_mapping_ros)

@@ -2,5 +2,6 @@
 set(FM_DETECTION_SOURCES
   detector.cpp
   depth_mask.cpp
+  mask_decisions.cpp
   vehicle_motion.cpp
 )

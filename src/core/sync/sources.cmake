@@ -2,4 +2,5 @@
 set(FM_SYNC_SOURCES
   frame_pacer.cpp
   frame_sync.cpp
+  sync_report.cpp
 )
