@@ -183,6 +183,7 @@ const struct {
       "--max-sets"}},
     {"tsdf_benchmark", {"--out", "--frames", "--threads", "--drive"}},
     {"param_docs", {"docs/parameters.md"}},
+    {"detector_model", {"DETECTOR", "--model", "--finetuned-model", "--config-dir", "--list", "nanodet", "finetuned"}},
 };
 
 TEST(ToolOptions, HelpPrintsTheFullUsageOnStdout) {
@@ -219,6 +220,7 @@ TEST(ToolOptions, AMissingValueNamesTheOption) {
       {"detector_benchmark", "--image"}, {"map_accuracy", "--csv"},
       {"map_tool", "--max-weight"},     {"offline_mapper", "--sync-tolerance"},
       {"plane_sweep_depth", "--bag"},   {"tsdf_benchmark", "--drive"},
+      {"detector_model", "nanodet --model"},
   };
   for (const auto& c : cases) {
     const ToolRunApart r = runToolApart(tool(c.tool) + " " + c.args);

@@ -100,3 +100,9 @@ fm_add_test(test_own_rig_node ROSTEST test/launch/own_rig.test SOURCES test/test
 fm_add_test(test_detector_eval SOURCES test/test_detector_eval.cpp DEPENDS detector_eval)
 fm_add_test(test_launch_files SOURCES test/test_launch_files.cpp INCLUDES ${PROJECT_SOURCE_DIR}/test)
 include(${CMAKE_CURRENT_LIST_DIR}/ros_tools.cmake)
+# The detector registry and the detector_model tool the launch files run.
+fm_add_test(test_detector_registry SOURCES test/test_detector_registry.cpp)
+add_dependencies(test_launch_files detector_model)
+add_dependencies(test_dynamic_objects_node detector_model)
+add_dependencies(test_tool_options detector_model)
+add_dependencies(test_rostopic_echo_node detector_model)
