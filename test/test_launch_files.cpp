@@ -78,9 +78,12 @@ TEST(LaunchFiles, VehicleLaunchStopsOnAMissingBagOrCalibration) {
   EXPECT_EQ(r.status, 0) << r.out;
   EXPECT_NE(r.out.find("/fisheye_mapping/sync"), std::string::npos) << r.out;
 
+  // An unknown detector name: the registry (detector_model) stops roslaunch, listing the known ones.
   r = nodes("bag:=none rviz:=false detector:=yolo" + rig);
   EXPECT_NE(r.status, 0) << r.out;
-  EXPECT_NE(r.out.find("choose_nanodet_finetuned_darknet_or_ground_truth"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("detector_model: unknown detector 'yolo' (known: nanodet, finetuned, darknet, "),
+            std::string::npos)
+      << r.out;
 }
 
 // detector:=finetuned loads the model YAML that scripts/tools/train_vehicle_detector
@@ -95,8 +98,10 @@ TEST(LaunchFiles, FinetunedDetectorNeedsItsModelInTheCache) {
   const std::string env = "FISHEYE_MAPPING_CACHE=" + cache + " ";
   auto r = runTool(env + "roslaunch --nodes " + kLaunchDir + "/vehicle.launch bag:=none rviz:=false detector:=finetuned" + rig);
   EXPECT_NE(r.status, 0) << r.out;
-  EXPECT_NE(r.out.find(yaml), std::string::npos) << r.out;
-  EXPECT_NE(r.out.find("make_it_with_scripts_tools_train_vehicle_detector"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("detector_model: detector finetuned: " + yaml +
+                       " does not exist (make it with scripts/tools/train_vehicle_detector)"),
+            std::string::npos)
+      << r.out;
 
   ASSERT_EQ(std::system(("mkdir -p " + cache + "/models/finetuned && touch " + yaml).c_str()), 0);
   r = runTool(env + "roslaunch --dump-params " + kLaunchDir + "/vehicle.launch bag:=none rviz:=false detector:=finetuned" + rig);
@@ -107,7 +112,35 @@ TEST(LaunchFiles, FinetunedDetectorNeedsItsModelInTheCache) {
   EXPECT_EQ(r.status, 0) << r.out;
   EXPECT_NE(r.out.find("config/detector/nanodet.yaml"), std::string::npos) << r.out;
   EXPECT_EQ(r.out.find("models/finetuned"), std::string::npos) << r.out;
+  // finetuned_model:= replaces the cache's model.
+  r = runTool(env + "roslaunch --dump-params " + kLaunchDir + "/vehicle.launch bag:=none rviz:=false detector:=finetuned" +
+              " finetuned_model:=" + kRig + "/default_mount.yaml" + rig);
+  EXPECT_EQ(r.status, 0) << r.out;
+  EXPECT_NE(r.out.find("/fisheye_mapping/detector/model_config: " + kRig + "/default_mount.yaml"), std::string::npos)
+      << r.out;
   std::system(("rm -rf " + cache).c_str());
+}
+
+// dynamic_objects.launch: the registry's model of the name (darknet: the
+// YOLOv3-tiny YAML), a model YAML path as the detector, or model_config:= over
+// any name.
+TEST(LaunchFiles, DynamicObjectsLaunchTakesANameOrAModel) {
+  const std::string launch = "roslaunch --dump-params " + kLaunchDir + "/dynamic_objects.launch";
+  auto r = runTool(launch + " detector:=darknet");
+  ASSERT_EQ(r.status, 0) << r.out;
+  EXPECT_NE(r.out.find("/detector/model_config: "), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("config/detector/yolov3-tiny.yaml"), std::string::npos) << r.out;
+  const std::string own = std::string(FM_CONFIG_DIR) + "/detector/yolov8n.yaml";
+  r = runTool(launch + " detector:=" + own);
+  ASSERT_EQ(r.status, 0) << r.out;
+  EXPECT_NE(r.out.find("/detector/model_config: " + own), std::string::npos) << r.out;
+  r = runTool(launch + " detector:=nanodet model_config:=" + own);
+  ASSERT_EQ(r.status, 0) << r.out;
+  EXPECT_NE(r.out.find("/detector/model_config: " + own), std::string::npos) << r.out;
+  // --nodes: --dump-params exits 0 even when the file cannot be loaded.
+  r = runTool("roslaunch --nodes " + kLaunchDir + "/dynamic_objects.launch detector:=/nonexistent/model.yaml");
+  EXPECT_NE(r.status, 0) << r.out;
+  EXPECT_NE(r.out.find("detector_model: detector /nonexistent/model.yaml does not exist"), std::string::npos) << r.out;
 }
 
 TEST(LaunchFiles, NamespaceAndFramesReachTheStagesAndRviz) {

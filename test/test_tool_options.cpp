@@ -183,6 +183,7 @@ const struct {
       "--max-sets"}},
     {"tsdf_benchmark", {"--out", "--frames", "--threads", "--drive"}},
     {"param_docs", {"docs/parameters.md"}},
+    {"detector_model", {"DETECTOR", "--model", "--finetuned-model", "--config-dir", "--list", "nanodet", "finetuned"}},
 };
 
 TEST(ToolOptions, HelpPrintsTheFullUsageOnStdout) {
@@ -219,6 +220,7 @@ TEST(ToolOptions, AMissingValueNamesTheOption) {
       {"detector_benchmark", "--image"}, {"map_accuracy", "--csv"},
       {"map_tool", "--max-weight"},     {"offline_mapper", "--sync-tolerance"},
       {"plane_sweep_depth", "--bag"},   {"tsdf_benchmark", "--drive"},
+      {"detector_model", "nanodet --model"},
   };
   for (const auto& c : cases) {
     const ToolRunApart r = runToolApart(tool(c.tool) + " " + c.args);
@@ -240,6 +242,8 @@ TEST(ToolOptions, DepthEvalRefusesMalformedNumbers) {
       {" --frames 0", "depth_eval: --frames must lie in [1, 100000], got 0\n"},
       {" --max-range -1", "depth_eval: --max-range must lie in [0.1, 10000], got -1\n"},
       {" --seed 1.5", "depth_eval: --seed needs a whole number, got '1.5'\n"},
+      {" --wall-planes 2x", "depth_eval: --wall-planes needs a whole number, got '2x'\n"},
+      {" --step 1s", "depth_eval: --step needs a number, got '1s'\n"},
   };
   for (const auto& c : cases) {
     const ToolRunApart r = runToolApart(base + c.args);

@@ -52,6 +52,7 @@
 #include "fisheye_mapping/core/common/params.h"
 #include "fisheye_mapping/core/depth/depth_image.h"
 #include "fisheye_mapping/core/mapping/frame_set_mapper.h"
+#include "fisheye_mapping/core/detection/detector_registry.h"
 #include "fisheye_mapping/core/sync/frame_sync.h"
 #include "fisheye_mapping/ros/bag_reading.h"
 #include "fisheye_mapping/ros/conversions.h"
@@ -63,13 +64,6 @@ namespace cli = fm::cli;
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-// The model YAML scripts/tools/train_vehicle_detector writes (with the score
-// threshold it chose on validation), as vehicle.launch's `finetuned_model`.
-std::string finetunedModelYaml() {
-  return fm::expandPath("${FISHEYE_MAPPING_CACHE:-${XDG_CACHE_HOME:-~/.cache}/fisheye_mapping}") +
-         "/models/finetuned/nanodet-fisheye.yaml";
-}
 
 const char* kUsage =
     "usage: offline_mapper --bag B --camchain F --mount F --out DIR [--config vehicle.yaml]\n"
@@ -83,9 +77,10 @@ const char* kUsage =
     "                     vehicles.csv (with a detector: each vehicle's motion decision)\n"
     "  --config YAML      sections sync, depth, detector, depth_mask, tsdf over the\n"
     "                     stage defaults (as vehicle.launch's config:=)\n"
-    "  --detector D       nanodet (default, as vehicle.launch), finetuned (the cache's\n"
+    "  --detector D       a name of the detector registry (as vehicle.launch's detector:=;\n"
+    "                     detector_model --list): nanodet (default), finetuned (the cache's\n"
     "                     models/finetuned/nanodet-fisheye.yaml, made by\n"
-    "                     scripts/tools/train_vehicle_detector), darknet (yolov3-tiny), a\n"
+    "                     scripts/tools/train_vehicle_detector), darknet (yolov3-tiny), ...; a\n"
     "                     model YAML, ground_truth (the oracle: the drive's true boxes)\n"
     "                     or none (nothing masked)\n"
     "  --depth SRC        sweep (default): plane-sweep depth; gt: the bag's ground-truth\n"
@@ -206,7 +201,7 @@ std::vector<std::string> imageTopics(const fm::Rig& rig, const std::vector<std::
 
 int main(int argc, char** argv) {
   std::string bag_path, camchain, mount, out, config_path, detector = "nanodet", world = "map", depth_src = "sweep";
-  std::string save_depth;
+  std::string save_depth, model_yaml;
   std::string config_dir = FM_CONFIG_DIR;
   std::map<std::string, std::string> topic_overrides;
   std::optional<fm::SyncPolicy> sync_policy;
@@ -244,12 +239,16 @@ int main(int argc, char** argv) {
     if (!config_path.empty()) cli::requireInputFile("--config", config_path);
     std::error_code ec;
     if (!std::filesystem::is_directory(config_dir, ec)) throw cli::UsageError("--config-dir: " + config_dir + " is not a folder");
-    if (detector == "finetuned" && !std::filesystem::is_regular_file(finetunedModelYaml()))
-      throw cli::UsageError("--detector finetuned: " + finetunedModelYaml() +
-                            " does not exist (make it with scripts/tools/train_vehicle_detector)");
-    if (detector != "none" && detector != "ground_truth" && detector != "nanodet" && detector != "finetuned" &&
-        detector != "darknet")
-      cli::requireInputFile("--detector", detector);
+    // The model of a detector name: the detector registry's (as vehicle.launch's).
+    if (detector != "none" && detector != "ground_truth") {
+      try {
+        model_yaml = fm::detectorModelPath(detector, config_dir);
+      } catch (const std::invalid_argument& e) {  // an unknown name
+        throw cli::UsageError("--detector: " + std::string(e.what()) + ", ground_truth or none");
+      } catch (const std::runtime_error& e) {  // its file is missing
+        throw cli::UsageError("--detector " + std::string(e.what()));
+      }
+    }
     cli::prepareOutputDir("--out", out);
     if (!save_depth.empty()) cli::prepareOutputDir("--save-depth", save_depth);
   });
@@ -271,14 +270,10 @@ int main(int argc, char** argv) {
     const std::vector<std::string> configured_topics = imageTopics(rig, sync_cfg.image_topics, topic_overrides);
     std::unique_ptr<fm::Detector> det;
     if (detector != "none" && detector != "ground_truth") {
-      std::string yaml = detector;
-      if (detector == "nanodet") yaml = config_dir + "/detector/nanodet.yaml";
-      else if (detector == "finetuned") yaml = finetunedModelYaml();
-      else if (detector == "darknet") yaml = config_dir + "/detector/yolov3-tiny.yaml";
       // The detector stage's config (thresholds, DNN device of the `detector`
       // section) with the model chosen by --detector, as the nodelet loads it.
       fm::DetectorStageConfig stage = mapper_cfg.detection;
-      stage.model_config = yaml;
+      stage.model_config = model_yaml;
       det = std::make_unique<fm::Detector>(stage.loadModel(), stage.device());
     }
     const bool detecting = det != nullptr;
