@@ -100,7 +100,7 @@ fm_fetch_nanodet() {
 
 # TensorFlow.js itself (core, converter, pure-JS CPU backend; pinned, no native
 # code) in $FM_CACHE/tfjs-4.22.0: the independent reference that
-# test/tools/test_tfjs_to_onnx.py runs the TF.js NanoDet with. Once, by npm.
+# test/tools/test_tfjs_to_onnx.py runs the TF.js NanoDet with. Once, by npm (77 MB).
 FM_TFJS_DIR="$FM_CACHE/tfjs-4.22.0"
 fm_fetch_tfjs() {
   [[ -f "$FM_TFJS_DIR/installed" ]] && return 0
