@@ -50,7 +50,8 @@ class TfjsToOnnx(unittest.TestCase):
         onnx_path = os.path.join(cls.tmp, "nanodet.onnx")
         subprocess.run([sys.executable, os.path.join(ROOT, "scripts", "tools", "tfjs_to_onnx.py"), MODEL, onnx_path],
                        check=True, stdout=subprocess.DEVNULL)
-        # The input both runs get: the image resized to 416 x 416, RGB, 0..1, NCHW.
+        # The input both runs get: the image resized to 416 x 416, RGB, 0..1, NCHW (the converter's
+        # --verify input; the detector's own normalisation differs, which does not matter here).
         blob = cv2.dnn.blobFromImage(cv2.imread(IMAGE), 1.0 / 255.0, (SIZE, SIZE), swapRB=True)
         blob = blob.astype(np.float32)
         blob.tofile(os.path.join(cls.tmp, "input.f32"))
