@@ -97,3 +97,17 @@ fm_fetch_nanodet() {
   mv "$FM_NANODET_ONNX.tmp" "$FM_NANODET_ONNX"
   echo "$stamp" > "$dir/nanodet-416.stamp"
 }
+
+# TensorFlow.js itself (core, converter, pure-JS CPU backend; pinned, no native
+# code) in $FM_CACHE/tfjs-4.22.0: the independent reference that
+# test/tools/test_tfjs_to_onnx.py runs the TF.js NanoDet with. Once, by npm (77 MB).
+FM_TFJS_DIR="$FM_CACHE/tfjs-4.22.0"
+fm_fetch_tfjs() {
+  [[ -f "$FM_TFJS_DIR/installed" ]] && return 0
+  command -v npm >/dev/null || { fm_log "npm is missing: cannot fetch TensorFlow.js"; return 1; }
+  fm_log "fetching TensorFlow.js 4.22.0 (core, converter, cpu backend) with npm, once"
+  mkdir -p "$FM_TFJS_DIR" && echo '{"private": true}' > "$FM_TFJS_DIR/package.json"
+  (cd "$FM_TFJS_DIR" && npm install --silent --no-audit --no-fund --ignore-scripts \
+    @tensorflow/tfjs-core@4.22.0 @tensorflow/tfjs-converter@4.22.0 @tensorflow/tfjs-backend-cpu@4.22.0) || return 1
+  touch "$FM_TFJS_DIR/installed"
+}
