@@ -1,61 +1,21 @@
-// Depth mask nodelet: removes potentially moving objects from depth maps
-// before fusion (paper Sec. III-B).
+// Depth mask nodelet (fisheye_mapping/DepthMask): removes potentially moving
+// objects from depth maps before fusion (paper Sec. III-B).
 //
-// Topics are relative to the node's namespace (vehicle.launch: /fisheye_mapping).
-// Subscribes  depth/image (sensor_msgs/Image 32FC1, range along the ray, NaN
-//             invalid; through image_transport, ~image_transport selects the transport)
-//             depth/camera_info (optional: the depth's CameraInfo, next to depth/image)
-//             detections (fisheye_mapping/Detection2DArray of the same camera)
-//             while someone listens to an image output (lazy).
-// Publishes   through image_transport, all with the depth map's header:
-//             depth_masked/image  (32FC1: NaN inside the boxes of the moving
-//                          and undecided vehicles, grown by ~margin_px; of
-//                          every box with ~mask_parked)
-//             depth_masked/mask   (mono8: 255 where a box removed depth)
-//             depth_masked/colour (bgr8: colour-coded masked depth, black
-//                          invalid, each box drawn with its decision: red
-//                          moving, green parked, yellow undecided; only
-//                          while subscribed; ~colour_range [near, far])
-//             depth_masked/vehicles (fisheye_mapping/TrackedVehicleArray:
-//                          each detection's decision, masked or not, track,
-//                          speed, position in ~world_frame, and the regions
-//                          of parked vehicles that drove off, which the TSDF
-//                          fusion carves free; for every depth map that came
-//                          with detections)
-//             depth_masked/camera_info: the latest depth/camera_info with the
-//                          masked depth's header (none until one has arrived;
-//                          masking never waits for it; said once in the log
-//                          and in the diagnostics).
-// Vehicles   each detected vehicle is placed in ~world_frame (default map)
-//             by the depth in its box, with depth/camera_info's camera and tf
-//             from ~world_frame to the depth's frame at its stamp, and
-//             tracked: moving, parked or undecided (core VehicleMotionTracker;
-//             ~moving_speed, ~decide_after, ...). Without a camera_info or the
-//             transform every vehicle is undecided, so masked (diagnostics
-//             "vehicle motion" names what is missing; a tf failure is counted).
-// Pairing     by exact stamp. A depth map waits up to ~wait_for_detections
-//             seconds (wall time) for its detections; then it passes through
-//             unmasked and is counted as a drop by reason (warning).
-//             A frame whose detections are empty passes unchanged.
-// Parameters  ~margin_px (default 10), ~wait_for_detections (default 0.5 s),
-//             ~max_pending (default 30 depth maps / detection sets),
-//             ~time_reset_threshold (s, default 1; 0: never), ~colour_range.
-//             All but colour_range also through dynamic_reconfigure
-//             (cfg/DepthMaskReconfigure.cfg), read by the same DepthMaskConfig::fromParams.
-// Time going backwards (depth or detection stamps back by more than the
-// threshold on their own stream, or the sim clock behind the newest stamp):
-// the pairing state, keyed on stamps, is cleared (depth maps still waiting are
-// dropped, not published: they belong to the old timeline; so are depth maps
-// and detections of the old timeline still in flight), with a warning naming
-// both stamps. Without it, a bag played twice would find its detections
-// "late" (their stamps were released in the first play) and pass every depth
-// map unmasked.
-// /diagnostics (StageMonitor, task "depth_mask"): depth rates in / out, masking
-// time, drops by reason ("no detections in time (passed unmasked)", "queue
-// full (passed unmasked)", "queue full (detection sets)", "late detections",
-// "time reset (waiting depth maps)", "stale (old timeline)", "bad depth
-// image"), time resets, callback errors, "passed unmasked (no detections in
-// time)" (total), "camera_info" and the parameters in use.
+// Its topics (relative to the node's namespace), parameters and diagnostics:
+// docs/nodelets.md#fisheye_mappingdetector-and-fisheye_mappingdepthmask; every
+// parameter: docs/parameters.md; the vehicles' motion: docs/dynamic_objects.md.
+// - Depth maps and detections pair by exact stamp; a depth map waits up to
+//   ~wait_for_detections (wall time), then passes unmasked (a drop by reason).
+// - Each detected vehicle is placed in ~world_frame by the depth in its box
+//   and tracked (core VehicleMotionTracker): moving and undecided ones are
+//   masked (every box with ~mask_parked); the regions of parked vehicles that
+//   drove off go out on depth_masked/vehicles for the TSDF to carve.
+// - depth_masked/camera_info is the latest depth/camera_info with the masked
+//   depth's header (core InfoRelay: latched, and republished when it comes
+//   after a depth map); masking never waits for it.
+// - Time going backwards on either stream (or the sim clock behind the newest
+//   stamp) clears the pairing state: depth maps of the old timeline are
+//   dropped, not published (a bag played twice would else pass unmasked).
 #include <memory>
 #include <mutex>
 #include <optional>

@@ -1,57 +1,23 @@
-// Plane-sweep depth nodelet: the core PlaneSweep over synchronized frame sets.
+// Depth nodelet (fisheye_mapping/Depth): the core DepthStage (plane sweep,
+// filters, online rotation self-calibration) over synchronized frame sets.
 //
-// Topics are relative to the node's namespace (vehicle.launch: /fisheye_mapping).
-// Subscribes  frames (fisheye_mapping/CameraFrameSet), only while someone
-//             listens to an output (lazy, as stereo_image_proc). The frame
-//             sets go through a one-set mailbox to a worker thread: a set that
-//             arrives while one waits replaces it (dropped "busy").
-// Publishes   through image_transport, all with the reference camera image's
-//             header (stamp, frame_id):
-//             depth/image      (32FC1: metres of Euclidean range along the
-//                               pixel's ray, NaN invalid) with
-//             depth/camera_info (the reference camera's CameraInfo: the depth
-//                               image is at the camera's full resolution)
-//             depth/image_z    (32FC1: REP 118 z-depth, metres along the
-//                               optical axis, NaN invalid and where a ray has
-//                               no forward component)
-//             depth/cost       (32FC1: best matching cost (1 - ZNCC) / 2, NaN none)
-//             depth/uniqueness (32FC1: best / second-best cost; ~publish_uniqueness)
-//             depth/self_calibration (fisheye_mapping/RigSelfCalibration,
-//                               latched: each supporting camera's rotation
-//                               correction, residual and state, after each
-//                               update of the online self-calibration)
-// Services    ~save_calibration (FilePath: the self-calibrated camchain and its
-//             mount, the old files kept as .1; empty path: ~self_calibration_file;
-//             relative: inside ~save_directory, $ROS_HOME/fisheye_mapping by
-//             default; outside it refused unless ~allow_any_save_path, unsafe;
-//             links replaced, never followed; FIFOs and devices refused;
-//             every write verified). The same save runs on shutdown when a
-//             correction was applied.
-// Parameters  ~rig_source (camchain | camera_info; default camchain),
-//             ~camchain, ~mount (camchain source), ~base_frame (camera_info
-//             source, default base_link): the rig from the frame sets'
-//             camera_infos and each camera frame's pose in it from tf2, built
-//             on the first frame set and again only when the CameraInfos
-//             change; until then sets are dropped ("no rig yet"),
-//             ~reference_camera (cam0; a name of the sets' camera_names),
-//             ~support_cameras (list; default all others), ~self_masks
-//             (dict camera -> mask image path, non-zero = car body),
-//             plane-sweep parameters (see config/plane_sweep_depth.yaml);
-//             filter thresholds and near / far / ground_height / ground_min /
-//             ground_max / wall_min / wall_max / min_parallax_* / min_overlap also through
-//             dynamic_reconfigure (cfg/DepthReconfigure.cfg; the latter
-//             rebuild the sweep), ~time_reset_threshold (s, default 1; 0: never),
-//             ~self_calibration* (the online rotation self-calibration, on by
-//             default: core/camera/online_calibration.h), ~self_calibration_file.
-//             /diagnostics (StageMonitor "depth"): input / output rates,
-//             processing time, drops by reason ("busy", "bad input" - logged
-//             with the stamp, the stage goes on), time resets, backend,
-//             supporting views used, each camera's self-calibration (WARN
-//             naming a camera that gets no update, and why).
-// Time going backwards (frame-set stamps back by more than the threshold, or
-// the sim clock behind the newest stamp) is logged with both stamps and
-// counted; the stage keeps no other state keyed on time (each frame set is
-// swept on its own, the mailbox holds one set).
+// Its topics (relative to the node's namespace), services, parameters and
+// diagnostics: docs/nodelets.md#fisheye_mappingdepth; every parameter:
+// docs/parameters.md.
+// - frames are read only while an output has a subscriber; they go through a
+//   one-set mailbox to a worker thread (a newer set replaces a waiting one:
+//   dropped "busy").
+// - depth/image (range along the ray), depth/image_z, depth/cost,
+//   depth/uniqueness and depth/camera_info carry the reference image's header;
+//   depth/self_calibration is latched after each self-calibration update.
+// - ~save_calibration writes the self-calibrated camchain inside
+//   ~save_directory (core/common/safe_write.h); the same save runs on shutdown
+//   when a correction was applied.
+// - With ~rig_source camera_info the rig comes from the frame sets'
+//   CameraInfos and tf, rebuilt only when they change ("no rig yet" until then).
+// - Time going backwards (stamps, or the sim clock behind the newest stamp) is
+//   logged and counted; each frame set is swept on its own, so no other state
+//   is keyed on time.
 #include <algorithm>
 #include <memory>
 #include <mutex>
