@@ -40,11 +40,11 @@
 #include "fisheye_mapping/ros/camera_models.h"
 #include "fisheye_mapping/ros/conversions.h"
 #include "fisheye_mapping/ros/file_services.h"
-#include "fisheye_mapping/ros/mesh_markers.h"
 #include "fisheye_mapping/ros/node_options.h"
 #include "fisheye_mapping/ros/ros_params.h"
 #include "fisheye_mapping/ros/stage_monitor.h"
 #include "fisheye_mapping/ros/tsdf_messages.h"
+#include "fisheye_mapping/ros/tsdf_topics.h"
 #include "fisheye_mapping/ros/tsdf_node_helpers.h"
 
 namespace fisheye_mapping {
@@ -101,7 +101,6 @@ class TsdfNodelet : public nodelet::Nodelet {
                                stage_->map().numSwapWriteFailures());
       }
     });
-    mesh_markers_ = std::make_unique<MeshMarkerStream>(opts_.world_frame, cfg.colour);
     sigterm_acquired_ = true;
     NODELET_INFO("%s", tsdf_node::acquireSigterm().c_str());
 
@@ -125,23 +124,23 @@ class TsdfNodelet : public nodelet::Nodelet {
     tf_filter_->registerFailureCallback([this](const ImagePtr& msg, tf2_ros::filter_failure_reasons::FilterFailureReason r) {
       guarded(depth_errors_, "tf failure", [&] { onTfFailure(*msg, r); });
     });
-    mesh_pub_ = nh.advertise<visualization_msgs::MarkerArray>("tsdf/mesh", 16, [this](const ros::SingleSubscriberPublisher& p) {
-      guarded(timer_errors_, "mesh subscriber connect", [&] { onMeshSubscriber(p); });
+    topics_ = std::make_unique<TsdfTopics>(nh, opts_.world_frame, cfg.colour, [this](const ros::SingleSubscriberPublisher& p) {
+      guarded(timer_errors_, "mesh subscriber connect", [&] { locked([&] { if (topics_) topics_->sendAll(*stage_, p); }); });
     });
-    cloud_pub_ = nh.advertise<sensor_msgs::PointCloud2>("tsdf/cloud", 2, true);
-    occupancy_pub_ = nh.advertise<nav_msgs::OccupancyGrid>("tsdf/occupancy", 1, true);
     done_pub_ = nh.advertise<fisheye_mapping::FrameDone>("tsdf/fusion_done", 100);
-    auto every = [&](double period, const char* what, void (TsdfNodelet::*fn)()) {
+    auto every = [&](double period, const char* what, std::function<void()> fn) {  // fn under mutex_
       return nh.createWallTimer(ros::WallDuration(period), [this, what, fn](const ros::WallTimerEvent&) {
-        guarded(timer_errors_, what, [&] { (this->*fn)(); });
+        guarded(timer_errors_, what, [&] { locked(fn); });
       });
     };
-    if (opts_.occupancy_period > 0) occupancy_timer_ = every(opts_.occupancy_period, "occupancy timer", &TsdfNodelet::publishOccupancy);
-    timer_ = every(opts_.publish_period, "publish timer", &TsdfNodelet::publish);
+    if (opts_.occupancy_period > 0) {
+      occupancy_timer_ = every(opts_.occupancy_period, "occupancy timer", [this] { topics_->publishOccupancy(*stage_); });
+    }
+    timer_ = every(opts_.publish_period, "publish timer", [this] { topics_->publish(*stage_); });
     if (opts_.autosave_period > 0.0 && !stage_->persistent()) {
       NODELET_WARN("~autosave_period %.1f s ignored: ~save_map_on_shutdown is not set", opts_.autosave_period);
     } else if (opts_.autosave_period > 0.0) {
-      autosave_timer_ = every(opts_.autosave_period, "autosave timer", &TsdfNodelet::autosave);
+      autosave_timer_ = every(opts_.autosave_period, "autosave timer", [this] { stage_->autosave(); });
     }
     advertiseServices(pnh);
     monitor_->setExtraReport([this](diagnostic_updater::DiagnosticStatusWrapper& stat) { diagnose(stat); });
@@ -171,7 +170,7 @@ class TsdfNodelet : public nodelet::Nodelet {
       NODELET_ERROR("reconfigure refused, running values kept: %s", error.c_str());
       return monitor_->error("reconfigure refused: " + error);
     }
-    mesh_markers_->markChanged(stage_->reconfigure(*next));
+    topics_->markChanged(stage_->reconfigure(*next));
     if (node->publish_period != opts_.publish_period) timer_.setPeriod(ros::WallDuration(node->publish_period));
     opts_ = *node;
     NODELET_INFO("reconfigured: max_range %.2f m (0: none), min_observations %d, publish_period %.2f s",
@@ -207,9 +206,10 @@ class TsdfNodelet : public nodelet::Nodelet {
     }
   }
 
-  void autosave() {
+  template <typename Fn>
+  void locked(Fn fn) {
     std::lock_guard<std::mutex> lock(mutex_);
-    stage_->autosave();
+    fn();
   }
 
   // Time went back by more than the threshold (a bag played again): the tf
@@ -220,7 +220,7 @@ class TsdfNodelet : public nodelet::Nodelet {
                  opts_.clear_map_on_time_reset ? "map cleared (~clear_map_on_time_reset)"
                                                : "map kept (~clear_map_on_time_reset: false; call ~clear_map to start afresh)");
     tf_buffer_->clear();
-    publishMeshReset();
+    topics_->publishReset(*stage_);
     return true;
   }
 
@@ -258,7 +258,7 @@ class TsdfNodelet : public nodelet::Nodelet {
     stat.add("failed service requests", files_->failures());
     stat.add("exceptions in timers", static_cast<size_t>(timer_errors_));
     stat.add("intensity images unreadable", static_cast<size_t>(image_errors_));
-    stat.add("mesh blocks on screen", mesh_markers_->numShown());
+    stat.add("mesh blocks on screen", topics_->numShown());
   }
 
   // Tells the paced player that this depth frame is finished with.
@@ -362,19 +362,6 @@ class TsdfNodelet : public nodelet::Nodelet {
     }
   }
 
-  void publishOccupancy() {
-    nav_msgs::OccupancyGrid msg;
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      double z = 0;
-      if (occupancy_pub_.getNumSubscribers() == 0) return;
-      const std::optional<OccupancyGrid> grid = stage_->occupancy(&z);
-      if (!grid) return;
-      msg = toOccupancyGridMsg(*grid, opts_.world_frame, ros::Time().fromNSec(stage_->lastStamp()), z);
-    }
-    occupancy_pub_.publish(msg);
-  }
-
   // A CameraInfo's model, parsed again only when the calibration changes; a
   // bad one is logged and counted, and that frame's depth dropped until a good one.
   void onCameraInfo(const sensor_msgs::CameraInfoConstPtr& msg) {
@@ -389,38 +376,14 @@ class TsdfNodelet : public nodelet::Nodelet {
     }
   }
 
-  // Every publish_period: the mesh blocks that changed, and the cloud.
-  void publish() {
-    std::lock_guard<std::mutex> lock(mutex_);
-    const std::vector<BlockIndex> changed = stage_->updateMesh();
-    const visualization_msgs::MarkerArray markers = mesh_markers_->update(stage_->mesher().blocks(), changed, meshStamp());
-    if (!markers.markers.empty()) mesh_pub_.publish(markers);
-    if (!stage_->takeCloudStale() && changed.empty()) return;
-    cloud_pub_.publish(toCloudMsg(stage_->mesher().surfaceCloud(), opts_.world_frame, meshStamp()));
-  }
-  // After a clear, load or reset (mutex_ held): rviz gets a DELETEALL.
-  void publishMeshReset() {
-    if (stage_->takeMeshReset()) mesh_pub_.publish(mesh_markers_->clear());
-  }
-  ros::Time meshStamp() const { return stage_->lastStamp() ? ros::Time().fromNSec(stage_->lastStamp()) : ros::Time::now(); }
-
-  // A late subscriber (rviz started mid-drive) gets pending changes with the others, then the whole mesh.
-  void onMeshSubscriber(const ros::SingleSubscriberPublisher& pub) {
-    std::lock_guard<std::mutex> lock(mutex_);
-    if (!stage_) return;
-    const auto pending = mesh_markers_->update(stage_->mesher().blocks(), stage_->updateMesh(), meshStamp());
-    if (!pending.markers.empty()) mesh_pub_.publish(pending);
-    pub.publish(mesh_markers_->republishAll(stage_->mesher().blocks(), meshStamp()));
-  }
-
   void advertiseServices(ros::NodeHandle& pnh) {
     using A = FilePathServices::Access;
     files_ = std::make_unique<FilePathServices>(pnh, save_folder_, mutex_, [this] { return stage_ != nullptr; },
                                                 [this](bool error, const std::string& m) { say(error, m); });
-    files_->add("save_mesh", "save mesh to", A::kSave, [this](const std::string& p) { mesh_markers_->markChanged(stage_->saveMesh(p)); });
-    files_->add("save_cloud", "save cloud to", A::kSave, [this](const std::string& p) { mesh_markers_->markChanged(stage_->saveCloud(p)); });
+    files_->add("save_mesh", "save mesh to", A::kSave, [this](const std::string& p) { topics_->markChanged(stage_->saveMesh(p)); });
+    files_->add("save_cloud", "save cloud to", A::kSave, [this](const std::string& p) { topics_->markChanged(stage_->saveCloud(p)); });
     files_->add("save_map", "save map to", A::kSave, [this](const std::string& p) { stage_->saveMap(p); });
-    files_->add("load_map", "load map from", A::kLoad, [this](const std::string& p) { stage_->loadMap(p), publishMeshReset(); });
+    files_->add("load_map", "load map from", A::kLoad, [this](const std::string& p) { stage_->loadMap(p), topics_->publishReset(*stage_); });
     clear_service_ = pnh.advertiseService<std_srvs::Trigger::Request, std_srvs::Trigger::Response>(
         "clear_map", [this](std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
           std::lock_guard<std::mutex> lock(mutex_);
@@ -428,7 +391,7 @@ class TsdfNodelet : public nodelet::Nodelet {
           if (!stage_) return res.message = "the TSDF fusion did not start", true;
           try {
             stage_->clear();
-            publishMeshReset();
+            topics_->publishReset(*stage_);
             res.success = true;
             res.message = "map cleared";
           } catch (const std::exception& e) {
@@ -463,12 +426,12 @@ class TsdfNodelet : public nodelet::Nodelet {
   std::unique_ptr<image_transport::ImageTransport> it_;
   image_transport::Subscriber image_sub_;
   ros::Subscriber info_sub_, vehicles_sub_;
-  ros::Publisher mesh_pub_, cloud_pub_, done_pub_, occupancy_pub_;
+  ros::Publisher done_pub_;
   std::unique_ptr<FilePathServices> files_;
   ros::ServiceServer clear_service_;
   ros::WallTimer timer_, autosave_timer_, occupancy_timer_, hold_timer_;
   std::unique_ptr<StageMonitor> monitor_;
-  std::unique_ptr<MeshMarkerStream> mesh_markers_;
+  std::unique_ptr<TsdfTopics> topics_;  // mesh, cloud, obstacle grid
   boost::recursive_mutex reconfigure_mutex_;
   std::unique_ptr<dynamic_reconfigure::Server<TsdfReconfigureConfig>> reconfigure_;
   bool sigterm_acquired_ = false;

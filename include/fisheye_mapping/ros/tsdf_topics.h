@@ -1,0 +1,55 @@
+// The TSDF stage's map outputs as topics (what the TSDF nodelet publishes
+// from its core TsdfFusionStage):
+//   tsdf/mesh       MarkerArray through MeshMarkerStream: only the blocks that
+//                   changed; a subscriber that connects later first gets the
+//                   whole mesh; one DELETEALL after a clear, load or reset;
+//   tsdf/cloud      PointCloud2 (latched) of the surface, when blocks changed
+//                   or after a reset;
+//   tsdf/occupancy  OccupancyGrid (latched) around the vehicle's last fused
+//                   pose, while someone subscribes.
+// The caller holds the stage's lock around every call but the constructor.
+#ifndef FISHEYE_MAPPING_ROS_TSDF_TOPICS_H_
+#define FISHEYE_MAPPING_ROS_TSDF_TOPICS_H_
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include <ros/node_handle.h>
+#include <ros/single_subscriber_publisher.h>
+
+#include "fisheye_mapping/core/tsdf/fusion_stage.h"
+#include "fisheye_mapping/ros/mesh_markers.h"
+
+namespace fisheye_mapping {
+
+class TsdfTopics {
+ public:
+  // `on_mesh_connect`: a subscriber connected to tsdf/mesh (the caller takes
+  // its lock and calls sendAll); it may run before the constructor returns.
+  TsdfTopics(ros::NodeHandle& nh, const std::string& world_frame, MeshColoring colour,
+             std::function<void(const ros::SingleSubscriberPublisher&)> on_mesh_connect);
+
+  // Every publish period: the mesh blocks that changed, and the cloud.
+  void publish(TsdfFusionStage& stage);
+  // After a clear, load or reset of the stage's map: rviz gets a DELETEALL.
+  void publishReset(TsdfFusionStage& stage);
+  // A late subscriber: pending changes to everyone first, then the whole mesh to it.
+  void sendAll(TsdfFusionStage& stage, const ros::SingleSubscriberPublisher& subscriber);
+  // The obstacle grid, when someone subscribes and the stage has a pose.
+  void publishOccupancy(TsdfFusionStage& stage);
+  // Blocks the stage re-meshed outside publish() (exports, a new min_observations).
+  void markChanged(const std::vector<BlockIndex>& blocks) { markers_.markChanged(blocks); }
+  size_t numShown() const { return markers_.numShown(); }
+
+ private:
+  ros::Time stamp(const TsdfFusionStage& stage) const;
+
+  std::string frame_;
+  MeshMarkerStream markers_;
+  ros::Publisher mesh_, cloud_, occupancy_;
+};
+
+}  // namespace fisheye_mapping
+
+#endif  // FISHEYE_MAPPING_ROS_TSDF_TOPICS_H_

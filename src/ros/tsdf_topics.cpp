@@ -1,0 +1,50 @@
+#include "fisheye_mapping/ros/tsdf_topics.h"
+
+#include <nav_msgs/OccupancyGrid.h>
+#include <sensor_msgs/PointCloud2.h>
+#include <visualization_msgs/MarkerArray.h>
+
+#include "fisheye_mapping/ros/conversions.h"
+#include "fisheye_mapping/ros/tsdf_messages.h"
+
+namespace fisheye_mapping {
+
+TsdfTopics::TsdfTopics(ros::NodeHandle& nh, const std::string& world_frame, MeshColoring colour,
+                       std::function<void(const ros::SingleSubscriberPublisher&)> on_mesh_connect)
+    : frame_(world_frame), markers_(world_frame, colour) {
+  mesh_ = nh.advertise<visualization_msgs::MarkerArray>("tsdf/mesh", 16, std::move(on_mesh_connect));
+  cloud_ = nh.advertise<sensor_msgs::PointCloud2>("tsdf/cloud", 2, true);
+  occupancy_ = nh.advertise<nav_msgs::OccupancyGrid>("tsdf/occupancy", 1, true);
+}
+
+ros::Time TsdfTopics::stamp(const TsdfFusionStage& stage) const {
+  return stage.lastStamp() ? ros::Time().fromNSec(stage.lastStamp()) : ros::Time::now();
+}
+
+void TsdfTopics::publish(TsdfFusionStage& stage) {
+  const std::vector<BlockIndex> changed = stage.updateMesh();
+  const visualization_msgs::MarkerArray markers = markers_.update(stage.mesher().blocks(), changed, stamp(stage));
+  if (!markers.markers.empty()) mesh_.publish(markers);
+  if (!stage.takeCloudStale() && changed.empty()) return;
+  cloud_.publish(toCloudMsg(stage.mesher().surfaceCloud(), frame_, stamp(stage)));
+}
+
+void TsdfTopics::publishReset(TsdfFusionStage& stage) {
+  if (stage.takeMeshReset()) mesh_.publish(markers_.clear());
+}
+
+void TsdfTopics::sendAll(TsdfFusionStage& stage, const ros::SingleSubscriberPublisher& subscriber) {
+  const visualization_msgs::MarkerArray pending =
+      markers_.update(stage.mesher().blocks(), stage.updateMesh(), stamp(stage));
+  if (!pending.markers.empty()) mesh_.publish(pending);
+  subscriber.publish(markers_.republishAll(stage.mesher().blocks(), stamp(stage)));
+}
+
+void TsdfTopics::publishOccupancy(TsdfFusionStage& stage) {
+  if (occupancy_.getNumSubscribers() == 0) return;
+  double z = 0;
+  const std::optional<OccupancyGrid> grid = stage.occupancy(&z);
+  if (grid) occupancy_.publish(toOccupancyGridMsg(*grid, frame_, ros::Time().fromNSec(stage.lastStamp()), z));
+}
+
+}  // namespace fisheye_mapping
