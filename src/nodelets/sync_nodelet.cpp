@@ -48,7 +48,7 @@
 #include <tf2_ros/transform_listener.h>
 
 #include "fisheye_mapping/CameraFrameSet.h"
-#include "fisheye_mapping/FrameSyncReconfigureConfig.h"
+#include "fisheye_mapping/SyncReconfigureConfig.h"
 #include "fisheye_mapping/core/sync/frame_sync.h"
 #include "fisheye_mapping/core/sync/sync_report.h"
 #include "fisheye_mapping/ros/camera_info.h"
@@ -72,7 +72,7 @@ std::string cameraInfoTopic(const std::string& image_topic) {
 
 class SyncNodelet : public nodelet::Nodelet {
   using Sync = FrameSetSync<sensor_msgs::ImageConstPtr>;
-  using SyncReconfigure = FrameSyncReconfigureConfig;  // the generated class
+  using SyncReconfigure = SyncReconfigureConfig;  // the generated class
 
  private:
   void onInit() override {
