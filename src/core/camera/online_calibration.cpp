@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <functional>
+#include <optional>
 #include <filesystem>
 #include <sstream>
 #include <stdexcept>
@@ -150,7 +151,7 @@ OnlineRigCalibrator::OnlineRigCalibrator(const Rig& given, int reference, std::v
       refinement_(config.refinement()),
       quick_(refinement_),
       matcher_(config.refinement(), std::move(self_masks)),
-      rng_(refinement_.seed) {
+      rngs_() {
   config_.validate();
   // The newest set alone only has to tell a knock: a smaller sample will do.
   quick_.max_fit_matches = std::max(config_.min_inliers, 800);
@@ -163,6 +164,7 @@ OnlineRigCalibrator::OnlineRigCalibrator(const Rig& given, int reference, std::v
       throw std::invalid_argument(given_.cameras[c].name + ": no baseline to the reference camera");
   }
   pools_.resize(n);
+  for (int c = 0; c < n; ++c) rngs_.emplace_back(refinement_.seed + uint64_t(c));
   has_far_.assign(n, false);
   far_target_.assign(n, Eigen::Matrix3d::Identity());
   last_thumbs_.resize(n);
@@ -306,89 +308,102 @@ void OnlineRigCalibrator::update(const std::vector<cv::Mat>& grey) {
     for (int c : supports_) state_[c].warn = true, state_[c].status = std::string("matching failed: ") + e.what();
     return;
   }
-  for (int c : supports_) {
-    if (usable[c].empty()) continue;
-    CameraCalibrationState& s = state_[c];
-    auto& pool = pools_[c];
-    const Eigen::Isometry3d T_cur = relative(rig_, c);
-    // 1. The newest set alone far from the current rotation, twice in a row
-    //    and both times to the same place: the older matches no longer
-    //    describe the camera, the pool restarts from those two sets. (Once
-    //    is not enough: a single set of mostly near points is biased by the
-    //    calibrated translation's error.)
-    Eigen::Isometry3d T_new;
-    const CameraRefinement alone = estimateCameraCorrection(found[c], T_cur, quick_, rng_, &T_new);
-    const bool far_off = alone.status == CameraRefinement::Status::kApplied && alone.correction_deg > config_.change_deg;
-    if (far_off && has_far_[c] && !pool.empty() &&
-        angleOf(far_target_[c].transpose() * T_new.linear()) < config_.change_deg) {
-      while (pool.size() > 1) pool.pop_front();  // the previous set, the first one far off
-      ++s.restarts;
-      has_far_[c] = false;
-    } else {
-      has_far_[c] = far_off;
-      if (far_off) far_target_[c] = T_new.linear();
-    }
-    pool.push_back(std::move(found[c]));
-    while (int(pool.size()) > config_.window) pool.pop_front();
-    std::vector<EpipolarMatch> pooled;
-    std::vector<int> groups;
-    for (size_t k = 0; k < pool.size(); ++k) {
-      pooled.insert(pooled.end(), pool[k].begin(), pool[k].end());
-      groups.insert(groups.end(), pool[k].size(), int(k));
-    }
-    s.pooled_matches = int(pooled.size());
-    // 2. The pool, with the held-out test (halves of whole frame sets) and
-    //    the significance test.
-    Eigen::Isometry3d T_fit;
-    const CameraRefinement fit = estimateCameraCorrection(pooled, T_cur, refinement_, rng_, &T_fit, groups);
-    s.inliers = fit.inliers;
-    s.residual_deg = fit.rms_before_deg;
-    s.last_fit_deg = fit.status == CameraRefinement::Status::kApplied ? fit.correction_deg : 0.0;
-    if (fit.status == CameraRefinement::Status::kTooFewInliers) {
-      s.warn = true;
-      s.status = "not enough evidence: " + fit.message + ": not updated";
-      continue;
-    }
-    s.warn = false;
-    // One frame set alone cannot tell its scene's bias (near points and the
-    // calibrated translation's error) from the camera's error: a fit is
-    // applied only once the pool holds two sets (held out against each other)
-    // - except the first correction of a camera (first_set), in full, when
-    // the set alone wants more than change_deg (what one set is trusted to
-    // tell from its scene's bias, as for a knock): a one-set fit is then far
-    // closer than the calibration as given, and nothing was swept with that
-    // yet. Smaller errors, and everything after, go through the pool.
-    const bool first = config_.first_set && s.updates == 0 && !started_from_file_ && pool.size() == 1 &&
-                       fit.status == CameraRefinement::Status::kApplied && fit.correction_deg > config_.change_deg;
-    if (fit.status == CameraRefinement::Status::kApplied && pool.size() < 2 && config_.window >= 2 && !first) {
-      s.status = "warming up (one frame set of evidence; a fit is applied from two on)";
-      continue;
-    }
-    if (fit.status != CameraRefinement::Status::kApplied) {
-      s.status = "converged (" + fit.message + ")";
-      continue;
-    }
-    // 3. The total from the given calibration must stay within the maximum.
-    const Eigen::Matrix3d R_given = relative(given_, c).linear();
-    const double gain = first ? 1.0 : config_.gain;
-    const Eigen::Matrix3d step = expSo3(gain * logSo3(T_cur.linear().transpose() * T_fit.linear()));
-    const Eigen::Matrix3d R_next = T_cur.linear() * step;
-    const double total_fit_deg = angleOf(R_given.transpose() * T_fit.linear()) / kDeg;
-    if (total_fit_deg > config_.max_correction_deg) {
-      ++s.refused;
-      s.warn = true;
-      s.status = "correction of " + fixed(total_fit_deg, 3) + " deg from the given calibration refused (above " +
-                 "self_calibration_max_correction_deg " + fixed(config_.max_correction_deg, 3) + " deg)";
-      continue;
-    }
-    // 4. Smoothly (the first set's fit in full).
-    applyRotation(c, R_next);
-    ++s.updates;
-    s.status = std::string(first ? "first correction, from one frame set" : "correcting") + " (fit " +
-               fixed(fit.correction_deg, 3) + " deg, residual " + fixed(fit.rms_before_deg, 3) +
-               " -> " + fixed(fit.rms_after_deg, 3) + " deg, held out " + fixed(fit.heldout_before_deg, 4) + " -> " +
-               fixed(fit.heldout_after_deg, 4) + " deg)";
+  // The cameras' fits are independent (each its own pool, state and random
+  // stream): they run in parallel, and the rotations are applied after.
+  std::vector<std::optional<Eigen::Matrix3d>> next(n);
+  const std::vector<int>& cams = supports_;
+#pragma omp parallel for schedule(dynamic)
+  for (int k = 0; k < int(cams.size()); ++k) {
+    const int c = cams[k];
+    if (!usable[c].empty()) next[c] = fitCamera(c, std::move(found[c]));
   }
+  for (int c : supports_) {
+    if (!next[c]) continue;
+    applyRotation(c, *next[c]);
+    ++state_[c].updates;
+  }
+}
+
+std::optional<Eigen::Matrix3d> OnlineRigCalibrator::fitCamera(int c, std::vector<EpipolarMatch> found) {
+  CameraCalibrationState& s = state_[c];
+  auto& pool = pools_[c];
+  const Eigen::Isometry3d T_cur = relative(rig_, c);
+  // 1. The newest set alone far from the current rotation, twice in a row
+  //    and both times to the same place: the older matches no longer
+  //    describe the camera, the pool restarts from those two sets. (Once
+  //    is not enough: a single set of mostly near points is biased by the
+  //    calibrated translation's error.)
+  Eigen::Isometry3d T_new;
+  const CameraRefinement alone = estimateCameraCorrection(found, T_cur, quick_, rngs_[c], &T_new);
+  const bool far_off = alone.status == CameraRefinement::Status::kApplied && alone.correction_deg > config_.change_deg;
+  if (far_off && has_far_[c] && !pool.empty() &&
+      angleOf(far_target_[c].transpose() * T_new.linear()) < config_.change_deg) {
+    while (pool.size() > 1) pool.pop_front();  // the previous set, the first one far off
+    ++s.restarts;
+    has_far_[c] = false;
+  } else {
+    has_far_[c] = far_off;
+    if (far_off) far_target_[c] = T_new.linear();
+  }
+  pool.push_back(std::move(found));
+  while (int(pool.size()) > config_.window) pool.pop_front();
+  std::vector<EpipolarMatch> pooled;
+  std::vector<int> groups;
+  for (size_t k = 0; k < pool.size(); ++k) {
+    pooled.insert(pooled.end(), pool[k].begin(), pool[k].end());
+    groups.insert(groups.end(), pool[k].size(), int(k));
+  }
+  s.pooled_matches = int(pooled.size());
+  // 2. The pool, with the held-out test (halves of whole frame sets) and
+  //    the significance test.
+  Eigen::Isometry3d T_fit;
+  const CameraRefinement fit = estimateCameraCorrection(pooled, T_cur, refinement_, rngs_[c], &T_fit, groups);
+  s.inliers = fit.inliers;
+  s.residual_deg = fit.rms_before_deg;
+  s.last_fit_deg = fit.status == CameraRefinement::Status::kApplied ? fit.correction_deg : 0.0;
+  if (fit.status == CameraRefinement::Status::kTooFewInliers) {
+    s.warn = true;
+    s.status = "not enough evidence: " + fit.message + ": not updated";
+    return std::nullopt;
+  }
+  s.warn = false;
+  // One frame set alone cannot tell its scene's bias (near points and the
+  // calibrated translation's error) from the camera's error: a fit is
+  // applied only once the pool holds two sets (held out against each other)
+  // - except the first correction of a camera (first_set), in full, when
+  // the set alone wants more than change_deg (what one set is trusted to
+  // tell from its scene's bias, as for a knock): a one-set fit is then far
+  // closer than the calibration as given, and nothing was swept with that
+  // yet. Smaller errors, and everything after, go through the pool.
+  const bool first = config_.first_set && s.updates == 0 && !started_from_file_ && pool.size() == 1 &&
+                     fit.status == CameraRefinement::Status::kApplied && fit.correction_deg > config_.change_deg;
+  if (fit.status == CameraRefinement::Status::kApplied && pool.size() < 2 && config_.window >= 2 && !first) {
+    s.status = "warming up (one frame set of evidence; a fit is applied from two on)";
+    return std::nullopt;
+  }
+  if (fit.status != CameraRefinement::Status::kApplied) {
+    s.status = "converged (" + fit.message + ")";
+    return std::nullopt;
+  }
+  // 3. The total from the given calibration must stay within the maximum.
+  const Eigen::Matrix3d R_given = relative(given_, c).linear();
+  const double gain = first ? 1.0 : config_.gain;
+  const Eigen::Matrix3d step = expSo3(gain * logSo3(T_cur.linear().transpose() * T_fit.linear()));
+  const Eigen::Matrix3d R_next = T_cur.linear() * step;
+  const double total_fit_deg = angleOf(R_given.transpose() * T_fit.linear()) / kDeg;
+  if (total_fit_deg > config_.max_correction_deg) {
+    ++s.refused;
+    s.warn = true;
+    s.status = "correction of " + fixed(total_fit_deg, 3) + " deg from the given calibration refused (above " +
+               "self_calibration_max_correction_deg " + fixed(config_.max_correction_deg, 3) + " deg)";
+    return std::nullopt;
+  }
+  // 4. Smoothly (the first set's fit in full): applied by update().
+  s.status = std::string(first ? "first correction, from one frame set" : "correcting") + " (fit " +
+             fixed(fit.correction_deg, 3) + " deg, residual " + fixed(fit.rms_before_deg, 3) +
+             " -> " + fixed(fit.rms_after_deg, 3) + " deg, held out " + fixed(fit.heldout_before_deg, 4) + " -> " +
+             fixed(fit.heldout_after_deg, 4) + " deg)";
+  return R_next;
 }
 
 void OnlineRigCalibrator::startFrom(const std::string& camchain_path) {

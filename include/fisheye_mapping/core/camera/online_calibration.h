@@ -45,6 +45,7 @@
 #define FISHEYE_MAPPING_CORE_CAMERA_ONLINE_CALIBRATION_H_
 
 #include <deque>
+#include <optional>
 #include <random>
 #include <string>
 #include <vector>
@@ -154,6 +155,11 @@ class OnlineRigCalibrator {
 
  private:
   void update(const std::vector<cv::Mat>& grey);
+  // One support camera's step of update(): its newest matches join its pool,
+  // the fits and tests run, its state is set. Returns the rotation
+  // R_ref_cam to apply, if any. Touches only camera c's state (update() runs
+  // the cameras in parallel).
+  std::optional<Eigen::Matrix3d> fitCamera(int c, std::vector<EpipolarMatch> found);
   void applyRotation(int c, const Eigen::Matrix3d& R_ref_cam);
   Eigen::Isometry3d relative(const Rig& rig, int c) const;
 
@@ -163,10 +169,10 @@ class OnlineRigCalibrator {
   SelfCalibrationConfig config_;
   RigRefinementConfig refinement_, quick_;  // the pool's fit; the newest set's alone
   RigMatcher matcher_;
-  std::mt19937_64 rng_;
+  std::vector<std::mt19937_64> rngs_;  // per camera: RANSAC sampling (the cameras' fits run in parallel)
   std::vector<std::deque<std::vector<EpipolarMatch>>> pools_;  // per camera, newest last
   std::vector<cv::Mat> last_thumbs_;                           // per camera, at the last update
-  std::vector<bool> has_far_;                 // per camera: the last update's newest set alone was far off
+  std::vector<char> has_far_;                 // per camera (not vector<bool>: written in parallel): the last update's newest set alone was far off
   std::vector<Eigen::Matrix3d> far_target_;   // ... and where it wanted R_ref_cam
   bool started_from_file_ = false;            // self_calibration_start was used
   std::vector<CameraCalibrationState> state_;
