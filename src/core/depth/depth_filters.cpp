@@ -12,13 +12,15 @@
 
 namespace fisheye_mapping {
 
-double estimateNoiseStd(const cv::Mat& image, const cv::Mat& valid) {
+namespace {
+
+// Immerkaer's (1996) noise operator N = [1 -2 1; -2 4 -2; 1 -2 1] at every
+// pixel whose 3x3 neighbourhood is valid: f(|N|, 3x3 mean). N has zero
+// response to planar intensity; on white noise of std s its response has
+// std 6 s.
+template <typename F>
+void forNoiseResponses(const cv::Mat& image, const cv::Mat& valid, F&& f) {
   CV_Assert(image.type() == CV_32FC1 && (valid.empty() || (valid.type() == CV_8UC1 && valid.size() == image.size())));
-  // Immerkaer (1996): N = [1 -2 1; -2 4 -2; 1 -2 1] has zero response to
-  // planar intensity; on white noise of std s its response has std 6 s, and
-  // a normal variable's median absolute value is 0.6745 std.
-  std::vector<float> r;
-  r.reserve(static_cast<size_t>(image.rows) * image.cols / 2);
   for (int v = 1; v + 1 < image.rows; ++v) {
     const float* a = image.ptr<float>(v - 1);
     const float* b = image.ptr<float>(v);
@@ -31,29 +33,150 @@ double estimateNoiseStd(const cv::Mat& image, const cv::Mat& valid) {
         continue;
       }
       const float n = a[u - 1] - 2 * a[u] + a[u + 1] - 2 * (b[u - 1] - 2 * b[u] + b[u + 1]) + c[u - 1] - 2 * c[u] + c[u + 1];
-      r.push_back(std::fabs(n));
+      const float mean = (a[u - 1] + a[u] + a[u + 1] + b[u - 1] + b[u] + b[u + 1] + c[u - 1] + c[u] + c[u + 1]) / 9.0f;
+      f(std::fabs(n), mean);
     }
   }
-  if (r.empty()) return 0.0;
-  // The lower quartile: texture and edges add to the upper part of the
-  // distribution. |N(0, 1)|'s quartile is 0.3186.
-  std::nth_element(r.begin(), r.begin() + r.size() / 4, r.end());
-  return r[r.size() / 4] / (0.3186 * 6.0);
 }
 
-cv::Mat texturelessRegions(const cv::Mat& image, const cv::Mat& valid, double min_snr, double min_noise_std,
+// The lower quartile of |N| as a noise std: texture and edges add to the
+// upper part of the distribution. |N(0, 1)|'s quartile is 0.3186.
+double noiseStdOf(std::vector<float>* responses) { return quantileOfSteps(responses, 0.25) / (0.3186 * 6.0); }
+
+}  // namespace
+
+double estimateNoiseStd(const cv::Mat& image, const cv::Mat& valid) {
+  std::vector<float> r;
+  r.reserve(static_cast<size_t>(image.rows) * image.cols / 2);
+  forNoiseResponses(image, valid, [&](float n, float) { r.push_back(n); });
+  return r.empty() ? 0.0 : noiseStdOf(&r);
+}
+
+NoiseModel estimateNoiseModel(const cv::Mat& image, const cv::Mat& valid, double min_std) {
+  // The responses binned by their 3x3 mean intensity; each bin with enough
+  // pixels gives a variance at its intensity; a + b I is fitted to them by
+  // least squares weighted by the bins' counts (a, b >= 0), as a lower
+  // envelope (below).
+  constexpr int kBins = 16;
+  constexpr size_t kMinCount = 500;
+  std::vector<std::vector<float>> bins(kBins);
+  std::vector<double> sum_i(kBins, 0.0);
+  forNoiseResponses(image, valid, [&](float n, float mean) {
+    const int k = std::clamp(static_cast<int>(mean * kBins), 0, kBins - 1);
+    bins[k].push_back(n);
+    sum_i[k] += mean;
+  });
+  struct Bin {
+    double w, i, var;
+  };
+  std::vector<Bin> used;
+  std::vector<float> all;
+  for (int k = 0; k < kBins; ++k) {
+    all.insert(all.end(), bins[k].begin(), bins[k].end());
+    // The darkest and brightest bins are left out: clipping at black and
+    // white cuts their noise.
+    if (bins[k].size() < kMinCount || k == 0 || k == kBins - 1) continue;
+    const double w = static_cast<double>(bins[k].size());
+    used.push_back({w, sum_i[k] / w, std::pow(noiseStdOf(&bins[k]), 2)});
+  }
+  NoiseModel m;
+  m.min_std = min_std;
+  m.a = all.empty() ? 0.0 : std::pow(noiseStdOf(&all), 2);  // one variance for all, if nothing better
+  // Texture only adds to a bin's estimate: a bin made mostly of textured
+  // pixels (a facade, foliage) reads far above the sensor's noise. The fit is
+  // a lower envelope grown from the quietest bin: the bins within 1.5 x the
+  // current model's variance are fitted, and again with the model that
+  // gives, until the set stays the same.
+  if (used.empty()) return m;
+  double a = used[0].var, slope = 0;
+  for (const Bin& b : used) a = std::min(a, b.var);
+  std::vector<char> keep(used.size(), 0);
+  for (int round = 0; round < 16; ++round) {
+    bool changed = false;
+    for (size_t k = 0; k < used.size(); ++k) {
+      const char in = used[k].var <= 1.5 * (a + slope * used[k].i) ? 1 : 0;
+      changed = changed || in != keep[k];
+      keep[k] = in;
+    }
+    if (!changed) break;
+    double sw = 0, si = 0, sv = 0, sii = 0, siv = 0;
+    for (size_t k = 0; k < used.size(); ++k) {
+      if (!keep[k]) continue;
+      const Bin& b = used[k];
+      sw += b.w, si += b.w * b.i, sv += b.w * b.var, sii += b.w * b.i * b.i, siv += b.w * b.i * b.var;
+    }
+    a = sv / sw, slope = 0;  // one variance: the weighted mean
+    const double det = sw * sii - si * si;
+    if (det > 1e-12 * sw * sw) {
+      const double b = (sw * siv - si * sv) / det;
+      if (b > 0) {
+        slope = b, a = (sv - b * si) / sw;
+        if (a < 0) a = 0, slope = siv / sii;  // through the origin
+      }
+    }
+  }
+  m.a = a, m.b = slope;
+  return m;
+}
+
+double quantileOfSteps(std::vector<float>* values, double q) {
+  std::vector<float>& r = *values;
+  if (r.empty()) return 0.0;
+  const size_t k = std::min(r.size() - 1, static_cast<size_t>(q * r.size()));
+  std::nth_element(r.begin(), r.begin() + k, r.end());
+  const float x = r[k];
+  // Values of quantised images come in steps (an 8-bit image's operator
+  // responses are whole multiples of 1/255): many values equal x. Each such
+  // value stands for an interval reaching halfway to the next smaller and
+  // larger values, over which the tied ones are spread evenly; the quantile
+  // is interpolated there (as the median of grouped data), so it moves
+  // smoothly with the noise instead of jumping a step at a time.
+  // Tied: equal but for float rounding (the same step summed in another order).
+  const float eps = 1e-4f * std::fabs(x) + 1e-12f;
+  size_t below = 0, tied = 0;
+  float prev = -INFINITY, next = INFINITY;
+  for (const float v : r) {
+    if (v < x - eps) ++below, prev = std::max(prev, v);
+    else if (v <= x + eps) ++tied;
+    else next = std::min(next, v);
+  }
+  if (tied <= 1 || !std::isfinite(prev) || !std::isfinite(next)) return x;
+  const double lo = 0.5 * (prev + x), hi = 0.5 * (x + next);
+  const double within = (q * r.size() - below) / tied;
+  return lo + std::clamp(within, 0.0, 1.0) * (hi - lo);
+}
+
+double windowSnrThreshold(double min_snr_3x3, int window) {
+  if (!(min_snr_3x3 > 1.0) || window <= 3) return min_snr_3x3;
+  // The sample variance of n pixels of pure noise has a relative standard
+  // error of sqrt(2 / (n - 1)): the excess variance ratio min_snr^2 - 1 asked
+  // of a 3x3 window is that many standard errors, asked again of the larger one.
+  const double n = double(window) * window;
+  return std::sqrt(1.0 + (min_snr_3x3 * min_snr_3x3 - 1.0) * std::sqrt(8.0 / (n - 1.0)));
+}
+
+cv::Mat texturelessRegions(const cv::Mat& image, const cv::Mat& valid, double min_snr, const NoiseModel& noise,
                            int window) {
   CV_Assert(image.type() == CV_32FC1 && valid.type() == CV_8UC1 && valid.size() == image.size() && window >= 3);
-  const double noise = std::max(estimateNoiseStd(image, valid), min_noise_std);
-  const double floor2 = min_snr * noise * min_snr * noise;
-  auto variance = [&](int size) {
+  const double window_snr = windowSnrThreshold(min_snr, window);
+  // Whether a size x size window's variance is below snr^2 times the noise
+  // variance at the window's mean intensity.
+  auto flatAt = [&](int size, double snr) {
     cv::Mat mean, sq;
     cv::boxFilter(image, mean, CV_32F, cv::Size(size, size), cv::Point(-1, -1), true, cv::BORDER_REPLICATE);
     cv::boxFilter(image.mul(image), sq, CV_32F, cv::Size(size, size), cv::Point(-1, -1), true, cv::BORDER_REPLICATE);
-    return cv::Mat(sq - mean.mul(mean));
+    cv::Mat flat(image.size(), CV_8UC1);
+    const double s2 = snr * snr;
+    for (int v = 0; v < image.rows; ++v) {
+      const float* m = mean.ptr<float>(v);
+      const float* q = sq.ptr<float>(v);
+      uint8_t* f = flat.ptr<uint8_t>(v);
+      for (int u = 0; u < image.cols; ++u) f[u] = (q[u] - m[u] * m[u]) < s2 * noise.variance(m[u]) ? 255 : 0;
+    }
+    return flat;
   };
-  const cv::Mat var3 = variance(3), var_window = variance(window);
-  cv::Mat flat = (var3 < floor2) & (valid != 0);
+  const cv::Mat flat_window = flatAt(window, window_snr);
+  cv::Mat flat = flatAt(3, min_snr) & (valid != 0);
   cv::Mat labels, stats, centroids;
   const int n = cv::connectedComponentsWithStats(flat, labels, stats, centroids, 4, CV_32S);
   // A region flat at 3x3 three quarters of whose windows are flat too (sky,
@@ -63,9 +186,9 @@ cv::Mat texturelessRegions(const cv::Mat& image, const cv::Mat& valid, double mi
   std::vector<int> flat_windows(n, 0);
   for (int v = 0; v < image.rows; ++v) {
     const int* l = labels.ptr<int>(v);
-    const float* w = var_window.ptr<float>(v);
+    const uint8_t* w = flat_window.ptr<uint8_t>(v);
     for (int u = 0; u < image.cols; ++u) {
-      if (l[u] > 0 && w[u] < floor2) ++flat_windows[l[u]];
+      if (l[u] > 0 && w[u]) ++flat_windows[l[u]];
     }
   }
   const int min_area = std::max(1, static_cast<int>(0.002 * cv::countNonZero(valid)));

@@ -73,7 +73,9 @@ const ParamTable<DepthFilterConfig>& DepthFilterConfig::params() {
     t.flag("filter_texture", [](C& c) -> bool& { return c.texture; },
            "Drop pixels whose reference window has too little texture for the image's noise (sky, blank walls)", kRun)
         .number("min_texture_snr", [](C& c) -> double& { return c.min_texture_snr; }, R::atLeast(0), "",
-                "Smallest window std / sensor noise std kept (also defines textureless regions)", kRun)
+                "Smallest window std / sensor noise std kept, for a 3x3 window; larger windows need the same "
+                "significance, so less (1.5: 1.23 at 7x7); also defines textureless regions",
+                kRun)
         .number("min_noise_std", [](C& c) -> double& { return c.min_noise_std; }, R::above(0), "",
                 "Floor of the estimated sensor noise std, image values in [0, 1] (1/255: one 8-bit step)")
         .flag("filter_cost", [](C& c) -> bool& { return c.cost; }, "Drop pixels whose best matching cost exceeds alpha",

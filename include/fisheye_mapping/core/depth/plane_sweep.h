@@ -37,6 +37,8 @@
 #define FISHEYE_MAPPING_CORE_DEPTH_PLANE_SWEEP_H_
 
 #include <memory>
+#include <algorithm>
+#include <cmath>
 #include <string>
 #include <vector>
 
@@ -68,9 +70,13 @@ std::string toString(SweepBackendType b);
 
 struct DepthFilterConfig {
   // Texture: drop pixels with too little texture to correlate: the matching
-  // window's standard deviation is below min_texture_snr times the image's
-  // sensor noise (estimated per frame and scale from the image itself, at
-  // least min_noise_std), or the pixel lies in a textureless region (sky,
+  // window's standard deviation is below the image's sensor noise at the
+  // window's mean intensity (NoiseModel, estimated per frame from the
+  // full-resolution image itself, at least min_noise_std; averaged down at
+  // coarser scales) times min_texture_snr,
+  // stated for a 3x3 window: a larger window needs the same significance
+  // against pure noise, so a lower ratio (windowSnrThreshold), or the pixel
+  // lies in a textureless region (sky,
   // blank walls: see texturelessRegions), where windows reaching across the
   // region's edge would match the edge.
   bool texture = true;
@@ -215,7 +221,7 @@ struct DepthResult {
   cv::Mat raw_depth;   // the same before filtering
   cv::Mat cost;        // best cost, NaN where no plane had one
   cv::Mat uniqueness;  // best / second-best cost, NaN where none
-  cv::Mat texture;     // reference window std / sensor noise std, NaN where none
+  cv::Mat texture;     // reference window std / sensor noise std, as a 3x3 window's of the same significance (windowSnrThreshold); NaN where none
   cv::Mat infinity_cost;  // cost at infinity (filters.infinity), NaN where none or not computed
   std::vector<std::string> used_views;     // supporting views matched
   std::vector<std::string> dropped_views;  // "<name>: reason"
@@ -258,20 +264,54 @@ cv::Mat noParallaxEdges(const cv::Mat& depth, const cv::Mat& cost, const cv::Mat
                         double min_texture_snr, const cv::Mat& image, const cv::Mat& valid, double margin, int band_px);
 
 // Standard deviation of an image's sensor noise (image units), robust to
-// texture: the median absolute response of Immerkaer's noise operator (the
-// difference of two Laplacians, which cancels smooth intensity) over the
-// pixels whose 3x3 neighbourhood is valid (non-zero in `valid`, CV_8UC1, or
-// every pixel when empty). Returns 0 when there are no such pixels.
+// texture: the lower quartile of the absolute response of Immerkaer's noise
+// operator (the difference of two Laplacians, which cancels smooth
+// intensity) over the pixels whose 3x3 neighbourhood is valid (non-zero in
+// `valid`, CV_8UC1, or every pixel when empty), interpolated between the
+// steps of a quantised image (quantileOfSteps). Returns 0 when there are no
+// such pixels.
 double estimateNoiseStd(const cv::Mat& image, const cv::Mat& valid = cv::Mat());
+
+// A camera's sensor noise as a function of intensity I (image values in
+// [0, 1]): variance a + b I (read noise and shot noise, the Poisson-Gaussian
+// model of real sensors), std at least min_std.
+struct NoiseModel {
+  double a = 0.0, b = 0.0, min_std = 0.0;
+  double variance(double intensity) const {
+    return std::max(a + b * std::max(intensity, 0.0), min_std * min_std);
+  }
+  double stdAt(double intensity) const { return std::sqrt(variance(intensity)); }
+  // The model of the image averaged over f x f pixels (white noise).
+  NoiseModel averaged(int f) const { return {a / (f * f), b / (f * f), min_std / f}; }
+};
+
+// The noise model of an image (estimateNoiseStd's operator and quantile,
+// over the valid pixels binned by their 3x3 mean intensity, a + b I fitted
+// to the bins' variances weighted by their pixel counts, a, b >= 0). A
+// bright sky has more noise than a dark road: one std for the whole image
+// takes the sky's noise for texture.
+NoiseModel estimateNoiseModel(const cv::Mat& image, const cv::Mat& valid, double min_std);
+
+// The q-quantile (q in [0, 1]) of values that may come in steps: when
+// several values tie at it, interpolated within the interval the tied value
+// stands for (halfway to its neighbouring values), as the median of grouped
+// data. Reorders *values.
+double quantileOfSteps(std::vector<float>* values, double q);
+
+// The window std / noise std a `window` x `window` window must reach to be
+// as significant against pure noise as min_snr_3x3 is for a 3x3 window (the
+// excess variance ratio in standard errors of the sample variance,
+// sqrt(2 / (n - 1)) for n pixels): 1.5 at 3x3 is 1.23 at 7x7, 1.18 at 9x9.
+double windowSnrThreshold(double min_snr_3x3, int window);
 
 // Textureless regions of a grey float image (the sky, blank walls):
 // connected (4-neighbour) areas of valid pixels whose 3x3 standard deviation
-// is below min_snr times the image's noise (estimateNoiseStd, at least
-// min_noise_std) and three quarters of whose `window` x `window` windows are below it
-// too (a road can be flat at 3x3 while its texture shows at the matching
+// is below min_snr times the noise std at its mean intensity and three
+// quarters of whose `window` x `window` windows are below
+// windowSnrThreshold(min_snr, window) times it (a road can be flat at 3x3 while its texture shows at the matching
 // window's scale), each at least 0.2 % of the valid pixels, grown by 2
 // pixels. CV_8UC1, 255 inside.
-cv::Mat texturelessRegions(const cv::Mat& image, const cv::Mat& valid, double min_snr, double min_noise_std,
+cv::Mat texturelessRegions(const cv::Mat& image, const cv::Mat& valid, double min_snr, const NoiseModel& noise,
                            int window);
 
 // Which supporting views are worth matching (see PlaneSweepConfig). Returns
