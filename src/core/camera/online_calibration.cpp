@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <exception>
 #include <functional>
 #include <optional>
 #include <filesystem>
@@ -315,13 +316,22 @@ void OnlineRigCalibrator::update(const std::vector<cv::Mat>& grey) {
   }
   // The cameras' fits are independent (each its own pool, state and random
   // stream): they run in parallel, and the rotations are applied after.
+  // An exception must not leave the parallel loop (that would terminate the
+  // process): the first one is thrown again after it, as before.
   std::vector<std::optional<Eigen::Matrix3d>> next(n);
+  std::vector<std::exception_ptr> failed(n);
   const std::vector<int>& cams = supports_;
 #pragma omp parallel for schedule(dynamic)
   for (int k = 0; k < int(cams.size()); ++k) {
     const int c = cams[k];
-    if (!usable[c].empty()) next[c] = fitCamera(c, std::move(found[c]));
+    try {
+      if (!usable[c].empty()) next[c] = fitCamera(c, std::move(found[c]));
+    } catch (...) {
+      failed[c] = std::current_exception();
+    }
   }
+  for (int c : supports_)
+    if (failed[c]) std::rethrow_exception(failed[c]);
   for (int c : supports_) {
     if (!next[c]) continue;
     applyRotation(c, *next[c]);
