@@ -70,9 +70,7 @@ NoiseModel estimateNoiseModel(const cv::Mat& image, const cv::Mat& valid, double
     double w, i, var;
   };
   std::vector<Bin> used;
-  std::vector<float> all;
   for (int k = 0; k < kBins; ++k) {
-    all.insert(all.end(), bins[k].begin(), bins[k].end());
     // The darkest and brightest bins are left out: clipping at black and
     // white cuts their noise.
     if (bins[k].size() < kMinCount || k == 0 || k == kBins - 1) continue;
@@ -81,13 +79,18 @@ NoiseModel estimateNoiseModel(const cv::Mat& image, const cv::Mat& valid, double
   }
   NoiseModel m;
   m.min_std = min_std;
-  m.a = all.empty() ? 0.0 : std::pow(noiseStdOf(&all), 2);  // one variance for all, if nothing better
+  if (used.empty()) {
+    // Too few pixels in any bin (a small image): one variance for all.
+    std::vector<float> all;
+    for (const auto& b : bins) all.insert(all.end(), b.begin(), b.end());
+    m.a = all.empty() ? 0.0 : std::pow(noiseStdOf(&all), 2);
+    return m;
+  }
   // Texture only adds to a bin's estimate: a bin made mostly of textured
   // pixels (a facade, foliage) reads far above the sensor's noise. The fit is
   // a lower envelope grown from the quietest bin: the bins within 1.5 x the
   // current model's variance are fitted, and again with the model that
   // gives, until the set stays the same.
-  if (used.empty()) return m;
   double a = used[0].var, slope = 0;
   for (const Bin& b : used) a = std::min(a, b.var);
   std::vector<char> keep(used.size(), 0);
