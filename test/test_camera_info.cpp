@@ -10,6 +10,7 @@
 #include <gtest/gtest.h>
 
 #include "fisheye_mapping/ros/camera_info.h"
+#include "fisheye_mapping/ros/camera_models.h"
 #include "test_utils.h"
 
 namespace fisheye_mapping {
@@ -263,6 +264,61 @@ TEST(CameraInfo, ScaledForAHalfResolutionDepthImage) {
   EXPECT_EQ(o.height, 300u);
   EXPECT_THROW(scaledCameraInfo(cam, 0.0, "f", ros::Time()), std::invalid_argument);
   EXPECT_THROW(scaledCameraInfo(cam, 1e-4, "f", ros::Time()), std::invalid_argument);
+}
+
+// The one CameraInfo -> model cache (the TSDF's models by frame, the mask's
+// camera of its depth): parsed again only when the calibration changes, a
+// bad one refused with fromCameraInfo's error until a good one comes.
+TEST(CameraInfo, ModelsByFrameFollowTheCalibration) {
+  const Rig rig = loadRig();
+  CameraModelsByFrame cache;
+  sensor_msgs::CameraInfo front = toCameraInfo(rig.cameras[0], ros::Time(1.0));
+  EXPECT_EQ(cache.find("front_optical"), nullptr);
+  EXPECT_TRUE(cache.update(front));
+  const auto first = cache.find("front_optical");
+  ASSERT_NE(first, nullptr);
+  expectSameProjections(*first, rig.cameras[0].model);
+  front.header.stamp = ros::Time(2.0);  // the same calibration at another stamp: the same model
+  EXPECT_FALSE(cache.update(front));
+  EXPECT_EQ(cache.find("front_optical"), first);
+  EXPECT_EQ(cache.find("right_optical"), nullptr);  // another frame has none yet
+
+  sensor_msgs::CameraInfo bad = front;
+  bad.K[0] = -300;
+  for (int i = 0; i < 2; ++i) {  // a repeated bad one: the same error
+    try {
+      cache.update(bad);
+      ADD_FAILURE() << "a negative fx was accepted";
+    } catch (const CalibrationError& e) {
+      EXPECT_NE(std::string(e.what()).find("K[0] (fx): must be positive, got -300"), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_EQ(cache.find("front_optical"), nullptr);  // no model until a good one
+  front.K[2] = 500.0;                                 // cx moved 12 px: a new model
+  EXPECT_TRUE(cache.update(front));
+  Eigen::Vector2d uv;
+  ASSERT_TRUE(cache.find("front_optical")->project(Eigen::Vector3d(0, 0, 1), &uv));
+  EXPECT_NEAR(uv.x(), 500.0, 1e-9);  // the optical axis lands on the new centre
+  EXPECT_NEAR(uv.y(), 272.0, 1e-9);
+}
+
+TEST(CameraInfo, ModelFittingAnImageNamesWhyNot) {
+  const Rig rig = loadRig();
+  CameraModelsByFrame cache;
+  std::string why;
+  EXPECT_EQ(cache.fitting(nullptr, 1024, 544, "/depth/camera_info", &why), nullptr);
+  EXPECT_EQ(why, "no camera_info on /depth/camera_info");
+  auto info = boost::make_shared<sensor_msgs::CameraInfo>(toCameraInfo(rig.cameras[0], ros::Time()));
+  EXPECT_EQ(cache.fitting(info, 512, 272, "t", &why), nullptr);
+  EXPECT_EQ(why, "camera_info 1024x544 does not fit the image (512x272)");
+  const auto model = cache.fitting(info, 1024, 544, "t", &why);
+  ASSERT_NE(model, nullptr);
+  expectSameProjections(*model, rig.cameras[0].model);
+  auto bad = boost::make_shared<sensor_msgs::CameraInfo>(*info);
+  bad->D[0] = -0.5;
+  EXPECT_EQ(cache.fitting(bad, 1024, 544, "t", &why), nullptr);
+  EXPECT_EQ(why.rfind("camera_info refused: ", 0), 0u) << why;
+  EXPECT_NE(why.find("D[0] (xi): must be >= 0, got -0.5"), std::string::npos) << why;
 }
 
 }  // namespace

@@ -35,7 +35,7 @@ fisheye_mapping::test::ToolRun nodes(const std::string& args) {
 TEST(LaunchFiles, EveryUserArgumentHasADoc) {
   const std::regex arg_tag(R"re(<arg\s[^>]*>)re");
   const std::regex name_attr(R"re(name="([^"]+)")re");
-  for (const char* file : {"vehicle.launch", "plane_sweep_depth.launch", "tsdf_fusion.launch", "dynamic_objects.launch"}) {
+  for (const char* file : {"vehicle.launch", "depth.launch", "tsdf.launch", "dynamic_objects.launch"}) {
     const std::string text = readFile(kLaunchDir + "/" + file);
     ASSERT_FALSE(text.empty()) << file;
     int user_args = 0;

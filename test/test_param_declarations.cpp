@@ -511,8 +511,8 @@ void checkDefaultsFile(const std::string& file, const std::string& section) {
 }
 
 TEST(ParamDeclarations, StageDefaultFilesUseOnlyDeclaredNamesAtTheirDefaults) {
-  checkDefaultsFile("plane_sweep_depth.yaml", "depth");
-  checkDefaultsFile("tsdf_fusion.yaml", "tsdf");
+  checkDefaultsFile("depth.yaml", "depth");
+  checkDefaultsFile("tsdf.yaml", "tsdf");
 }
 
 TEST(ParamDeclarations, EverySectionOfVehicleYamlIsAStageAndUsesOnlyItsNames) {

@@ -4,6 +4,8 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <fstream>
+#include <limits>
 #include <set>
 #include <string>
 #include <vector>
@@ -175,6 +177,42 @@ TEST(TsdfFusionStage, RunTimeSettingsAreCheckedAndRemesh) {
   EXPECT_FALSE(s.reconfigure(next).empty());
   EXPECT_TRUE(s.takeCloudStale());
   EXPECT_EQ(s.mesher().numTriangles(), 0u);
+}
+
+// Failed swap writes (the swap folder became a file) are logged by the stage
+// through its log, at most once per 5 s, with the count so far; the blocks
+// stay in memory.
+TEST(TsdfFusionStage, FailedSwapWritesAreLoggedNotEveryTime) {
+  const fs::path dir = fs::temp_directory_path() / ("fm_stage_swap_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  TsdfConfig cfg = smallMap();
+  cfg.swap_directory = (dir / "swap").string();
+  std::vector<std::string> errors;
+  TsdfFusionStage s(cfg, TsdfStageOptions(), [&](bool error, const std::string& m) {
+    if (error) errors.push_back(m);
+  });
+  Wall wall;
+  for (int i = 0; i < 3; ++i) wall.fuse(s, i, (10 + i) * kS);
+  const size_t blocks = s.map().numBlocks();
+  ASSERT_GT(blocks, 10u);
+  fs::remove_all(dir / "swap");
+  std::ofstream(dir / "swap") << "not a folder";
+  // The vehicle 500 m away, then back, then away again: the wall's blocks
+  // leave the local map twice and cannot be written either time.
+  Eigen::Isometry3d far = wall.base(0), far_cam = wall.camera(0);
+  far.translation().x() += 500, far_cam.translation().x() += 500;
+  const cv::Mat nothing(136, 256, CV_32FC1, cv::Scalar(std::numeric_limits<float>::quiet_NaN()));
+  s.fuse(nothing, wall.cam, far_cam, far, 13 * kS);
+  const size_t failed_once = s.map().numSwapWriteFailures();
+  EXPECT_EQ(failed_once, s.map().numBlocks());  // every block: none is lost, all stay in memory
+  wall.fuse(s, 0, 14 * kS);
+  s.fuse(nothing, wall.cam, far_cam, far, 15 * kS);
+  EXPECT_GT(s.map().numSwapWriteFailures(), failed_once);
+  ASSERT_EQ(errors.size(), 1u) << "one message within 5 s, not one per block";
+  EXPECT_NE(errors[0].find(" swap writes failed so far)"), std::string::npos) << errors[0];
+  EXPECT_EQ(s.map().numLostBlocks(), 0u);
+  fs::remove_all(dir);
 }
 
 TEST(TsdfFusionStage, TheMapFileIsSavedOnShutdownAndReloaded) {

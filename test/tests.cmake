@@ -16,8 +16,8 @@ fm_add_test(test_rig_tf_publisher ROSTEST test/launch/rig_tf_publisher.test
 # --- frame sets and playback -----------------------------------------------
 fm_add_test(test_frame_sync SOURCES test/test_frame_sync.cpp)
 fm_add_test(test_frame_pacer SOURCES test/test_frame_pacer.cpp)
-fm_add_test(test_frame_sync_node ROSTEST test/launch/frame_sync.test
-  SOURCES test/test_frame_sync_node.cpp DEPENDS fisheye_mapping_nodelets)
+fm_add_test(test_sync_node ROSTEST test/launch/sync.test
+  SOURCES test/test_sync_node.cpp DEPENDS fisheye_mapping_nodelets)
 fm_add_test(test_paced_player_node ROSTEST test/launch/paced_player.test
   SOURCES test/test_paced_player_node.cpp DEPENDS paced_player)
 fm_add_test(test_synthetic_drive SOURCES test/test_synthetic_drive.cpp DEPENDS make_drive)
@@ -26,8 +26,8 @@ fm_add_test(test_synthetic_drive SOURCES test/test_synthetic_drive.cpp DEPENDS m
 fm_add_test(test_plane_sweep SOURCES test/test_plane_sweep.cpp)
 fm_add_test(test_plane_sweep_tool SOURCES test/test_plane_sweep_tool.cpp DEPENDS plane_sweep_depth)
 fm_add_test(test_depth_consistency SOURCES test/test_depth_consistency.cpp DEPENDS depth_eval)
-fm_add_test(test_plane_sweep_node ROSTEST test/launch/plane_sweep_depth.test
-  SOURCES test/test_plane_sweep_node.cpp DEPENDS fisheye_mapping_nodelets)
+fm_add_test(test_depth_node ROSTEST test/launch/depth.test
+  SOURCES test/test_depth_node.cpp DEPENDS fisheye_mapping_nodelets)
 
 # --- detection and masking -------------------------------------------------
 fm_add_test(test_detector SOURCES test/test_detector.cpp)
@@ -43,8 +43,8 @@ fm_add_test(test_tsdf_map_file SOURCES test/test_tsdf_map_file.cpp DEPENDS map_t
 fm_add_test(test_map_session SOURCES test/test_map_session.cpp)
 fm_add_test(test_tsdf_fusion_stage SOURCES test/test_tsdf_fusion_stage.cpp)
 fm_add_test(test_map_accuracy SOURCES test/test_map_accuracy.cpp DEPENDS map_accuracy)
-fm_add_test(test_tsdf_fusion_node ROSTEST test/launch/tsdf_fusion.test
-  SOURCES test/test_tsdf_fusion_node.cpp DEPENDS fisheye_mapping_nodelets)
+fm_add_test(test_tsdf_node ROSTEST test/launch/tsdf.test
+  SOURCES test/test_tsdf_node.cpp DEPENDS fisheye_mapping_nodelets)
 # The fusion node's life cycle: SIGTERM saves, a respawn keeps the saved map,
 # lost swap files do not abort. The test starts and signals the nodes itself.
 fm_add_test(test_tsdf_lifecycle_node ROSTEST test/launch/tsdf_lifecycle.test

@@ -54,10 +54,10 @@ def machine():
 
 def min_observations():
     """The TSDF's minimum observation count the maps use: config/vehicle.yaml's
-    tsdf section, else config/tsdf_fusion.yaml."""
+    tsdf section, else config/tsdf.yaml."""
     import yaml
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # scripts/eval/ -> the repository
-    for path, section in (("config/vehicle.yaml", "tsdf"), ("config/tsdf_fusion.yaml", None)):
+    for path, section in (("config/vehicle.yaml", "tsdf"), ("config/tsdf.yaml", None)):
         with open(os.path.join(root, path)) as f:
             doc = yaml.safe_load(f) or {}
         doc = (doc.get(section) or {}) if section else doc

@@ -39,6 +39,7 @@
 #include "fisheye_mapping/core/detection/depth_mask.h"
 #include "fisheye_mapping/core/detection/mask_decisions.h"
 #include "fisheye_mapping/ros/camera_info.h"
+#include "fisheye_mapping/ros/camera_models.h"
 #include "fisheye_mapping/ros/conversions.h"
 #include "fisheye_mapping/ros/node_options.h"
 #include "fisheye_mapping/ros/nodelet_glue.h"
@@ -290,8 +291,9 @@ class DepthMaskNodelet : public nodelet::Nodelet {
     std::optional<CameraModel> camera;
     {
       std::lock_guard<std::mutex> lock(info_mutex_);
-      if (const CameraModel* c = camera_.get(info_, depth.cols, depth.rows, info_in_topic_, &why)) camera = *c;
+      if (const auto c = cameras_.fitting(info_, depth.cols, depth.rows, info_in_topic_, &why)) camera = *c;
     }
+    if (!camera) why += ": every vehicle masked";
     const std::string& world = opts_.world_frame;
     std::optional<Eigen::Isometry3d> T_W_C;
     if (camera) {
@@ -316,7 +318,7 @@ class DepthMaskNodelet : public nodelet::Nodelet {
   std::unique_ptr<tf2_ros::Buffer> tf_buffer_;
   std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
   ros::Publisher vehicles_pub_;
-  CameraFromInfo camera_;  // info_mutex_
+  CameraModelsByFrame cameras_;  // info_mutex_
   std::string motion_state_ = "no vehicle yet";
   MotionCounts counts_;
   std::string info_in_topic_;

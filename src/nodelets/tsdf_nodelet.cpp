@@ -26,21 +26,17 @@
 
 #include <dynamic_reconfigure/server.h>
 #include <image_transport/image_transport.h>
-#include <message_filters/subscriber.h>
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
-#include <std_srvs/Trigger.h>
-#include <tf2_ros/buffer.h>
-#include <tf2_ros/message_filter.h>
-#include <tf2_ros/transform_listener.h>
 
-#include "fisheye_mapping/FrameDone.h"
 #include "fisheye_mapping/TsdfReconfigureConfig.h"
 #include "fisheye_mapping/core/tsdf/fusion_stage.h"
 #include "fisheye_mapping/ros/camera_models.h"
 #include "fisheye_mapping/ros/conversions.h"
 #include "fisheye_mapping/ros/file_services.h"
 #include "fisheye_mapping/ros/node_options.h"
+#include "fisheye_mapping/ros/nodelet_glue.h"
+#include "fisheye_mapping/ros/posed_input.h"
 #include "fisheye_mapping/ros/ros_params.h"
 #include "fisheye_mapping/ros/stage_monitor.h"
 #include "fisheye_mapping/ros/tsdf_messages.h"
@@ -66,6 +62,7 @@ class TsdfNodelet : public nodelet::Nodelet {
   void onInit() override {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
+    log_ = NodeletLogger(getName());
     TsdfConfig cfg;
     try {  // every parameter declared once: the map's in TsdfConfig, the node's in TsdfNodeOptions
       requireKnownParams(pnh, {TsdfConfig::params().names(), TsdfNodeOptions::params().names(), {"output_directory"}});
@@ -88,24 +85,14 @@ class TsdfNodelet : public nodelet::Nodelet {
                                                              : confineSavePath(opts_.save_map_on_shutdown, save_folder_),
                           opts_.reload_map_on_start, opts_.clear_map_on_time_reset,
                           opts_.time_reset.time_reset_threshold, opts_.occupancy};
-      stage_ = std::make_unique<TsdfFusionStage>(cfg, so, [this](bool error, const std::string& m) { say(error, m); });
+      stage_ = std::make_unique<TsdfFusionStage>(cfg, so, [this](bool error, const std::string& m) { log_.say(error, m); });
     } catch (const std::exception& e) {
       NODELET_ERROR("TSDF fusion not started: %s", e.what());
       return;
     }
-    stage_->map().setSwapErrorCallback([this](bool lost, const std::string& message) {
-      if (lost) {
-        NODELET_ERROR("%s", message.c_str());  // once per block: it is gone afterwards
-      } else {
-        NODELET_ERROR_THROTTLE(5.0, "%s (%zu swap writes failed so far)", message.c_str(),
-                               stage_->map().numSwapWriteFailures());
-      }
-    });
     sigterm_acquired_ = true;
     NODELET_INFO("%s", tsdf_node::acquireSigterm().c_str());
 
-    tf_buffer_ = std::make_unique<tf2_ros::Buffer>(ros::Duration(30.0));
-    tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_, nh);
     if (opts_.rig.fromCameraInfo()) {
       info_sub_ = nh.subscribe("depth_masked/camera_info", 10, &TsdfNodelet::onCameraInfo, this);
       // Frames that waited too long are dropped, "no camera_info yet".
@@ -116,18 +103,15 @@ class TsdfNodelet : public nodelet::Nodelet {
       it_ = std::make_unique<image_transport::ImageTransport>(nh);
       image_sub_ = it_->subscribe("image", 4, &TsdfNodelet::onImage, this);
     }
-    depth_sub_.subscribe(nh, "depth_masked/image", opts_.queue_size);
-    depth_sub_.registerCallback([this](const ImagePtr&) { monitor_->input(); });
-    tf_filter_ = std::make_unique<tf2_ros::MessageFilter<sensor_msgs::Image>>(depth_sub_, *tf_buffer_,
-                                                                              opts_.world_frame, opts_.queue_size, nh);
-    tf_filter_->registerCallback([this](const ImagePtr& msg) { images_->arrive(msg); });
-    tf_filter_->registerFailureCallback([this](const ImagePtr& msg, tf2_ros::filter_failure_reasons::FilterFailureReason r) {
-      guarded(depth_errors_, "tf failure", [&] { onTfFailure(*msg, r); });
-    });
+    depth_in_ = std::make_unique<PosedImageInput>(
+        nh, "depth_masked/image", opts_.world_frame, opts_.queue_size, [this](const ImagePtr&) { monitor_->input(); },
+        [this](const ImagePtr& msg) { images_->arrive(msg); },
+        [this](const ImagePtr& msg, const std::string& drop, const std::string& why) {
+          guarded(depth_errors_, "tf failure", [&] { onTfFailure(msg, drop, why); });
+        });
     topics_ = std::make_unique<TsdfTopics>(nh, opts_.world_frame, cfg.colour, [this](const ros::SingleSubscriberPublisher& p) {
       guarded(timer_errors_, "mesh subscriber connect", [&] { locked([&] { if (topics_) topics_->sendAll(*stage_, p); }); });
     });
-    done_pub_ = nh.advertise<fisheye_mapping::FrameDone>("tsdf/fusion_done", 100);
     auto every = [&](double period, const char* what, std::function<void()> fn) {  // fn under mutex_
       return nh.createWallTimer(ros::WallDuration(period), [this, what, fn](const ros::WallTimerEvent&) {
         guarded(timer_errors_, what, [&] { locked(fn); });
@@ -157,53 +141,34 @@ class TsdfNodelet : public nodelet::Nodelet {
   // A value outside its declared range is refused: the running values stay
   // and are reported back. Only what applies without a new map is run-time.
   void onReconfigure(TsdfReconfigureConfig& c) {
-    dynamic_reconfigure::Config values;
-    c.__toMessage__(values);
     std::lock_guard<std::mutex> lock(mutex_);
-    std::string error;
-    std::optional<TsdfConfig> next = reconfigured(TsdfConfig::params(), stage_->config(), values, error);
-    std::optional<TsdfNodeOptions> node;
-    if (next) node = reconfigured(TsdfNodeOptions::params(), opts_, values, error);
-    if (!next || !node) {
-      keepRunningValues(c, std::make_pair(std::cref(TsdfConfig::params()), stage_->config()),
-                        std::make_pair(std::cref(TsdfNodeOptions::params()), opts_));
-      NODELET_ERROR("reconfigure refused, running values kept: %s", error.c_str());
-      return monitor_->error("reconfigure refused: " + error);
-    }
-    topics_->markChanged(stage_->reconfigure(*next));
-    if (node->publish_period != opts_.publish_period) timer_.setPeriod(ros::WallDuration(node->publish_period));
-    opts_ = *node;
+    const auto next = checkedReconfigure(c, TsdfConfig::params(), stage_->config(), TsdfNodeOptions::params(), opts_,
+                                         *monitor_, log_, "reconfigure");
+    if (!next) return;
+    topics_->markChanged(stage_->reconfigure(next->first));
+    if (next->second.publish_period != opts_.publish_period) timer_.setPeriod(ros::WallDuration(next->second.publish_period));
+    opts_ = next->second;
     NODELET_INFO("reconfigured: max_range %.2f m (0: none), min_observations %d, publish_period %.2f s",
-                 next->max_range, next->min_observations, opts_.publish_period);
+                 next->first.max_range, next->first.min_observations, opts_.publish_period);
   }
 
-  // Runs fn; an exception is logged with the last frame's stamp, counted, and the stage goes on.
+  // Runs fn; an exception is logged with the last frame's stamp and counted
+  // by kind, and the stage goes on. Returns the exception's message, or "".
   template <typename Fn>
-  void guarded(std::atomic<size_t>& counter, const char* where, Fn fn) {
+  std::string guarded(std::atomic<size_t>& counter, const char* where, Fn fn) {
     try {
       fn();
+      return "";
     } catch (const std::exception& e) {
-      noteException(counter, where, e.what());
+      return failed(counter, where, e.what());
     } catch (...) {
-      noteException(counter, where, "unknown exception");
+      return failed(counter, where, "unknown exception");
     }
   }
-  void noteException(std::atomic<size_t>& counter, const char* where, const std::string& what) {
+  std::string failed(std::atomic<size_t>& counter, const char* where, const std::string& why) {
     ++counter;
-    if (monitor_) monitor_->error(std::string(where) + ": " + what);
-    NODELET_ERROR("exception in the %s callback (frame stamp %.3f): %s; caught, the stage goes on (%zu so far there)",
-                  where, last_stamp_seen_.toSec(), what.c_str(), static_cast<size_t>(counter));
-  }
-
-  // Through rosconsole, or on stderr once roscpp has shut down (as during the shutdown save).
-  void say(bool error, const std::string& message) {
-    if (!ros::ok()) {
-      std::fprintf(stderr, "[%s] [%s]: %s\n", error ? "ERROR" : " INFO", getName().c_str(), message.c_str());
-    } else if (error) {
-      NODELET_ERROR("%s", message.c_str());
-    } else {
-      NODELET_INFO("%s", message.c_str());
-    }
+    noteCallbackError(*monitor_, log_, where, last_stamp_seen_, why, 5.0);
+    return why;
   }
 
   template <typename Fn>
@@ -219,31 +184,23 @@ class TsdfNodelet : public nodelet::Nodelet {
     NODELET_WARN("depth frames: %s; tf cache cleared, %s", reason.c_str(),
                  opts_.clear_map_on_time_reset ? "map cleared (~clear_map_on_time_reset)"
                                                : "map kept (~clear_map_on_time_reset: false; call ~clear_map to start afresh)");
-    tf_buffer_->clear();
+    depth_in_->clear();
     topics_->publishReset(*stage_);
     return true;
   }
 
-  // A frame the tf2 MessageFilter gave up on: a drop, and a tf failure where the pose is missing.
-  void onTfFailure(const sensor_msgs::Image& msg, tf2_ros::filter_failure_reasons::FilterFailureReason reason) {
-    if (reason == tf2_ros::filter_failure_reasons::EmptyFrameID) {
-      monitor_->dropped("bad image");
-      NODELET_WARN_THROTTLE(5.0, "depth frame at %.3f has no frame_id; dropped", msg.header.stamp.toSec());
-    } else {
-      const std::string why = reason == tf2_ros::filter_failure_reasons::OutTheBack ? "older than the tf buffer"
-                                                                                     : "tf never arrived (or queue full)";
-      monitor_->dropped("no pose");
-      monitor_->tfFailure("'" + msg.header.frame_id + "' -> '" + opts_.world_frame + "' at " +
-                          std::to_string(msg.header.stamp.toSec()) + ": " + why);
-      NODELET_WARN_THROTTLE(5.0, "depth frame at %.3f (frame '%s') dropped: no transform to '%s' (%s)",
-                            msg.header.stamp.toSec(), msg.header.frame_id.c_str(), opts_.world_frame.c_str(), why.c_str());
-    }
-    {  // a bag played again: its tf lies before the cache's newest data, so its frames fail here first
+  // A frame the tf filter gave up on: dropped and acknowledged. A bag played
+  // again shows here first (its tf lies before the cache's newest data).
+  void onTfFailure(const ImagePtr& msg, const std::string& drop, const std::string& why) {
+    monitor_->dropped(drop);
+    if (drop == "no pose") monitor_->tfFailure(why);
+    log_.throttled(ros::console::levels::Warn, 5.0, "tf failure", "depth frame dropped: " + why);
+    {
       std::lock_guard<std::mutex> lock(mutex_);
-      std::string reason_text;
-      if (stage_->checkTimeReset(std::int64_t(msg.header.stamp.toNSec()), &reason_text)) timeReset(reason_text);
+      std::string reason;
+      if (stage_->checkTimeReset(std::int64_t(msg->header.stamp.toNSec()), &reason)) timeReset(reason);
     }
-    done(msg.header, "no transform from '" + msg.header.frame_id + "' to '" + opts_.world_frame + "'");
+    topics_->frameDone(msg->header, why);
   }
 
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat) {
@@ -261,34 +218,13 @@ class TsdfNodelet : public nodelet::Nodelet {
     stat.add("mesh blocks on screen", topics_->numShown());
   }
 
-  // Tells the paced player that this depth frame is finished with.
-  void done(const std_msgs::Header& header, const std::string& skipped_because) {
-    fisheye_mapping::FrameDone msg;
-    msg.header = header;
-    msg.fused = skipped_because.empty();
-    msg.reason = skipped_because;
-    done_pub_.publish(msg);
-  }
-
-  // Fuses one frame; every path acknowledges it (done), saying why it was skipped.
+  // Fuses one frame; every path acknowledges it (tsdf/fusion_done), saying why it was skipped.
   void processDepth(const ImagePtr& msg, const std::shared_ptr<const CameraModel>& model) {
     last_stamp_seen_ = msg->header.stamp;
-    std::string skipped = "not fused";
-    try {
-      skipped = fuse(msg, model);
-    } catch (const std::exception& e) {
-      skipped = std::string("error: ") + e.what();
-      monitor_->dropped("error");
-      noteException(depth_errors_, "depth", e.what());
-    } catch (...) {
-      skipped = "error: unknown exception";
-      monitor_->dropped("error");
-      noteException(depth_errors_, "depth", "unknown exception");
-    }
-    try {
-      done(msg->header, skipped);
-    } catch (...) {
-    }
+    std::string skipped;
+    const std::string error = guarded(depth_errors_, "depth", [&] { skipped = fuse(msg, model); });
+    if (!error.empty()) monitor_->dropped("error"), skipped = "error: " + error;
+    guarded(depth_errors_, "fusion_done", [&] { topics_->frameDone(msg->header, skipped); });
   }
 
   // Empty when fused, else why not (the drop counted by reason, logged).
@@ -320,8 +256,8 @@ class TsdfNodelet : public nodelet::Nodelet {
     }
     Eigen::Isometry3d T_W_C, T_W_B;
     try {
-      T_W_C = toIsometry(tf_buffer_->lookupTransform(opts_.world_frame, frame, msg->header.stamp));
-      T_W_B = toIsometry(tf_buffer_->lookupTransform(opts_.world_frame, opts_.base_frame, msg->header.stamp));
+      T_W_C = depth_in_->pose(frame, msg->header.stamp);
+      T_W_B = depth_in_->pose(opts_.base_frame, msg->header.stamp);
     } catch (const tf2::TransformException& e) {
       monitor_->tfFailure(e.what());
       return skip("no pose", std::string("no pose: ") + e.what());
@@ -343,10 +279,6 @@ class TsdfNodelet : public nodelet::Nodelet {
     monitor_->processed(StageStats::now() - t0);
     monitor_->output();  // the stage's product: a frame in the map
     if (!f.intensity_note.empty()) NODELET_WARN_THROTTLE(5.0, "%s", f.intensity_note.c_str());
-    if (f.stats.blocks_lost) {
-      NODELET_WARN("frame %.3f: %zu swapped blocks could not be read back and are lost (%zu so far)",
-                   msg->header.stamp.toSec(), f.stats.blocks_lost, stage_->map().numLostBlocks());
-    }
     return "";
   }
 
@@ -379,27 +311,12 @@ class TsdfNodelet : public nodelet::Nodelet {
   void advertiseServices(ros::NodeHandle& pnh) {
     using A = FilePathServices::Access;
     files_ = std::make_unique<FilePathServices>(pnh, save_folder_, mutex_, [this] { return stage_ != nullptr; },
-                                                [this](bool error, const std::string& m) { say(error, m); });
+                                                [this](bool error, const std::string& m) { log_.say(error, m); });
     files_->add("save_mesh", "save mesh to", A::kSave, [this](const std::string& p) { topics_->markChanged(stage_->saveMesh(p)); });
     files_->add("save_cloud", "save cloud to", A::kSave, [this](const std::string& p) { topics_->markChanged(stage_->saveCloud(p)); });
     files_->add("save_map", "save map to", A::kSave, [this](const std::string& p) { stage_->saveMap(p); });
     files_->add("load_map", "load map from", A::kLoad, [this](const std::string& p) { stage_->loadMap(p), topics_->publishReset(*stage_); });
-    clear_service_ = pnh.advertiseService<std_srvs::Trigger::Request, std_srvs::Trigger::Response>(
-        "clear_map", [this](std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
-          std::lock_guard<std::mutex> lock(mutex_);
-          res.success = false;
-          if (!stage_) return res.message = "the TSDF fusion did not start", true;
-          try {
-            stage_->clear();
-            topics_->publishReset(*stage_);
-            res.success = true;
-            res.message = "map cleared";
-          } catch (const std::exception& e) {
-            res.message = std::string("clear failed: ") + e.what();
-            noteException(service_errors_, "clear_map", e.what());
-          }
-          return true;
-        });
+    files_->addTrigger("clear_map", "clear map", [this] { stage_->clear(), topics_->publishReset(*stage_); });
   }
 
   // The carve regions (parked vehicles that drove off), in the map's frame;
@@ -419,21 +336,17 @@ class TsdfNodelet : public nodelet::Nodelet {
   TsdfNodeOptions opts_;    // publish_period as it runs
   SaveFolder save_folder_;  // where saves may write (~save_directory)
   std::unique_ptr<ImagesWithModels> images_;  // depth frames, in order, with their camera models
-  std::unique_ptr<tf2_ros::Buffer> tf_buffer_;
-  std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
-  message_filters::Subscriber<sensor_msgs::Image> depth_sub_;
-  std::unique_ptr<tf2_ros::MessageFilter<sensor_msgs::Image>> tf_filter_;
+  std::unique_ptr<PosedImageInput> depth_in_;  // depth frames, each once its pose is in the tf buffer
   std::unique_ptr<image_transport::ImageTransport> it_;
   image_transport::Subscriber image_sub_;
   ros::Subscriber info_sub_, vehicles_sub_;
-  ros::Publisher done_pub_;
   std::unique_ptr<FilePathServices> files_;
-  ros::ServiceServer clear_service_;
   ros::WallTimer timer_, autosave_timer_, occupancy_timer_, hold_timer_;
   std::unique_ptr<StageMonitor> monitor_;
   std::unique_ptr<TsdfTopics> topics_;  // mesh, cloud, obstacle grid
   boost::recursive_mutex reconfigure_mutex_;
   std::unique_ptr<dynamic_reconfigure::Server<TsdfReconfigureConfig>> reconfigure_;
+  NodeletLogger log_;
   bool sigterm_acquired_ = false;
   ros::Time last_stamp_seen_;  // of the last depth frame received (for error logs)
   // Exceptions caught per kind of callback.

@@ -1,5 +1,7 @@
 #include "fisheye_mapping/ros/file_services.h"
 
+#include <std_srvs/Trigger.h>
+
 #include "fisheye_mapping/ros/tsdf_node_helpers.h"
 
 namespace fisheye_mapping {
@@ -10,6 +12,26 @@ void FilePathServices::add(const std::string& name, const std::string& what, Acc
   using Res = fisheye_mapping::FilePath::Response;
   servers_.push_back(pnh_.advertiseService<Req, Res>(name, [this, what, access, fn](Req& req, Res& res) {
     run(res, req.path, what, access, fn);
+    return true;
+  }));
+}
+
+void FilePathServices::addTrigger(const std::string& name, const std::string& what, std::function<void()> fn) {
+  using Req = std_srvs::Trigger::Request;
+  using Res = std_srvs::Trigger::Response;
+  servers_.push_back(pnh_.advertiseService<Req, Res>(name, [this, what, fn](Req&, Res& res) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    res.success = false;
+    if (!ready_()) return res.message = "the stage did not start (see its error log)", true;
+    try {
+      fn();
+      res.success = true;
+      res.message = what + ": done";
+      log_(false, res.message);
+    } catch (const std::exception& e) {
+      res.message = what + " failed: " + e.what();
+      log_(true, res.message + " (" + std::to_string(++failures_) + " failed requests so far)");
+    }
     return true;
   }));
 }

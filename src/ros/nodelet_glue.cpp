@@ -1,5 +1,6 @@
 #include "fisheye_mapping/ros/nodelet_glue.h"
 
+#include <cstdio>
 #include <utility>
 
 #include "fisheye_mapping/ros/stage_health.h"
@@ -37,6 +38,14 @@ void NodeletLogger::log(ros::console::Level level, const std::string& text) cons
   ros::console::LogLocation* loc = logLocation(logger, level);
   if (loc->logger_enabled_)
     ros::console::print(nullptr, loc->logger_, loc->level_, __FILE__, __LINE__, __func__, "%s", text.c_str());
+}
+
+void NodeletLogger::say(bool error, const std::string& text) const {
+  if (!ros::ok()) {
+    std::fprintf(stderr, "[%s] [%s]: %s\n", error ? "ERROR" : " INFO", name_.c_str(), text.c_str());
+  } else {
+    log(error ? ros::console::levels::Error : ros::console::levels::Info, text);
+  }
 }
 
 void NodeletLogger::throttled(ros::console::Level level, double period_s, const std::string& key,

@@ -98,31 +98,6 @@ bool CameraInfoRigKey::describes(const std::vector<std::string>& other_names,
          std::equal(infos.begin(), infos.end(), other_infos.begin(), sameCalibration);
 }
 
-const CameraModel* CameraFromInfo::get(const sensor_msgs::CameraInfoConstPtr& info, int width, int height,
-                                       const std::string& topic, std::string* why) {
-  if (!info) {
-    *why = "no camera_info on " + topic + ": every vehicle masked";
-    return nullptr;
-  }
-  if (int(info->width) != width || int(info->height) != height) {
-    *why = "camera_info " + std::to_string(info->width) + "x" + std::to_string(info->height) +
-           " does not fit the depth: every vehicle masked";
-    return nullptr;
-  }
-  if (info != used_) {
-    used_ = info;
-    camera_.reset();
-    error_.clear();
-    try {
-      camera_ = fromCameraInfo(*info);
-    } catch (const std::exception& e) {
-      error_ = std::string("camera_info refused: ") + e.what() + ": every vehicle masked";
-    }
-  }
-  if (!camera_) *why = error_;
-  return camera_ ? &*camera_ : nullptr;
-}
-
 TrackedVehicleArray toTrackedVehicleArrayMsg(const std_msgs::Header& header, const std::string& world_frame,
                                              int image_w, int image_h, const Detection2DArray& dets,
                                              const std::vector<VehicleMotionTracker::Decision>& decisions,

@@ -4,6 +4,8 @@
 #include <sensor_msgs/PointCloud2.h>
 #include <visualization_msgs/MarkerArray.h>
 
+#include "fisheye_mapping/FrameDone.h"
+
 #include "fisheye_mapping/ros/conversions.h"
 #include "fisheye_mapping/ros/tsdf_messages.h"
 
@@ -15,6 +17,7 @@ TsdfTopics::TsdfTopics(ros::NodeHandle& nh, const std::string& world_frame, Mesh
   mesh_ = nh.advertise<visualization_msgs::MarkerArray>("tsdf/mesh", 16, std::move(on_mesh_connect));
   cloud_ = nh.advertise<sensor_msgs::PointCloud2>("tsdf/cloud", 2, true);
   occupancy_ = nh.advertise<nav_msgs::OccupancyGrid>("tsdf/occupancy", 1, true);
+  done_ = nh.advertise<fisheye_mapping::FrameDone>("tsdf/fusion_done", 100);
 }
 
 ros::Time TsdfTopics::stamp(const TsdfFusionStage& stage) const {
@@ -45,6 +48,14 @@ void TsdfTopics::publishOccupancy(TsdfFusionStage& stage) {
   double z = 0;
   const std::optional<OccupancyGrid> grid = stage.occupancy(&z);
   if (grid) occupancy_.publish(toOccupancyGridMsg(*grid, frame_, ros::Time().fromNSec(stage.lastStamp()), z));
+}
+
+void TsdfTopics::frameDone(const std_msgs::Header& header, const std::string& skipped_because) {
+  fisheye_mapping::FrameDone msg;
+  msg.header = header;
+  msg.fused = skipped_because.empty();
+  msg.reason = skipped_because;
+  done_.publish(msg);
 }
 
 }  // namespace fisheye_mapping

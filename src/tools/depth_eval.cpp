@@ -11,7 +11,7 @@
 //     Writes DIR/depth_frames.csv (one row per frame and configuration),
 //     DIR/depth_summary.md and colour-coded PNGs of the first frame. The
 //     sweeps are the depth stage's, read through DepthStageConfig::fromParams
-//     (config/plane_sweep_depth.yaml; + config/vehicle.yaml's depth
+//     (config/depth.yaml; + config/vehicle.yaml's depth
 //     section for the vehicle rows); the pass/fail minimums are kPass's
 //     (PassThresholds), printed next to each check in depth_summary.md.
 //
@@ -87,7 +87,7 @@ const char* kUsage =
     "                      search): the reference for what the stage's less work costs\n"
     "    --wall-planes N   wall planes on each side (depth wall_planes; default the sweep's)\n"
     "    --cloudy-sky      an overcast sky as contrasted as a real one (make_drive --cloudy-sky)\n"
-    "    The sweeps: config/plane_sweep_depth.yaml (the depth stage's defaults) with the filters of\n"
+    "    The sweeps: config/depth.yaml (the depth stage's defaults) with the filters of\n"
     "    each figure; \"vehicle.yaml\" rows: that file with config/vehicle.yaml's depth section over\n"
     "    it, as vehicle.launch runs the depth stage.\n"
     "  vcharge: motion stereo on the V-Charge sequence in --data, checked without ground truth\n"
@@ -219,11 +219,11 @@ YAML::Node loadYamlMap(const std::string& path) {
 }
 
 // The depth stage's sweep as the declarations read it (DepthStageConfig::fromParams):
-// config/plane_sweep_depth.yaml, with config/vehicle.yaml's depth section
+// config/depth.yaml, with config/vehicle.yaml's depth section
 // over it when `vehicle`, as vehicle.launch loads them; then the options.
 fm::PlaneSweepConfig stageSweep(const SyntheticOptions& o, bool vehicle) {
-  YAML::Node y = loadYamlMap(FM_CONFIG_DIR "/plane_sweep_depth.yaml");
-  std::string origin = "config/plane_sweep_depth.yaml";
+  YAML::Node y = loadYamlMap(FM_CONFIG_DIR "/depth.yaml");
+  std::string origin = "config/depth.yaml";
   if (vehicle) {
     const YAML::Node section = loadYamlMap(FM_CONFIG_DIR "/vehicle.yaml")["depth"];
     if (section && section.IsMap())

@@ -257,8 +257,8 @@ int main(int argc, char** argv) {
     const fm::Rig rig = fm::loadKalibrRig(camchain, mount);
     const YAML::Node config = config_path.empty() ? YAML::Node() : loadYaml(config_path);
     requireKnownConfig(config, config_path);
-    const fm::YamlParams sweep_p(stageParams(config_dir + "/plane_sweep_depth.yaml", config, "depth"), "depth");
-    const fm::YamlParams tsdf_p(stageParams(config_dir + "/tsdf_fusion.yaml", config, "tsdf"), "tsdf");
+    const fm::YamlParams sweep_p(stageParams(config_dir + "/depth.yaml", config, "depth"), "depth");
+    const fm::YamlParams tsdf_p(stageParams(config_dir + "/tsdf.yaml", config, "tsdf"), "tsdf");
     const fm::YamlParams mask_p(stageParams("", config, "depth_mask"), "depth_mask");
     const fm::YamlParams det_p(stageParams("", config, "detector"), "detector");
     const fm::FrameSetMapperConfig mapper_cfg = fm::FrameSetMapperConfig::fromParams(sweep_p, det_p, mask_p, tsdf_p);

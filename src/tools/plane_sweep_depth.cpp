@@ -53,7 +53,7 @@ const char* kUsage =
     "            [--sync-tolerance S])\n"
     "  --camchain F, --mount F  the rig (Kalibr camchain and mount), the calibration as given\n"
     "  --reference CAM      the camera whose depth is computed (default: the config's reference_camera, cam0)\n"
-    "  --config YAML        depth-stage parameters (as config/plane_sweep_depth.yaml: the sweep, support_cameras,\n"
+    "  --config YAML        depth-stage parameters (as config/depth.yaml: the sweep, support_cameras,\n"
     "                       self_masks, self_calibration_*)\n"
     "  --set KEY=VALUE      overrides one parameter (repeatable)\n"
     "  --image CAM=FILE     one camera's image (images mode; one per camera)\n"
@@ -80,7 +80,7 @@ std::pair<std::string, std::string> split(const std::string& kv, const std::stri
 }
 
 // The depth stage's configuration of a YAML file (the names of
-// config/plane_sweep_depth.yaml) with --set overrides, read by the same core
+// config/depth.yaml) with --set overrides, read by the same core
 // function as the nodelet's.
 fm::DepthStageConfig readConfig(const std::string& path, const std::vector<std::pair<std::string, std::string>>& sets) {
   YAML::Node y(YAML::NodeType::Map);

@@ -22,6 +22,9 @@
 
 namespace fisheye_mapping {
 
+// The one CameraInfo -> camera model cache of the ROS layer: the TSDF stage's
+// models by frame id (ImagesWithModels) and the mask stage's camera of its
+// depth maps (fitting()). Not thread-safe.
 class CameraModelsByFrame {
  public:
   // Null when no good CameraInfo of `frame` has come.
@@ -32,21 +35,47 @@ class CameraModelsByFrame {
   bool contains(const std::string& frame) const { return models_.count(frame) > 0; }
 
   // True when the model of msg's frame is new or changed. A bad CameraInfo
-  // throws fromCameraInfo's error, and that frame has no model until a good one.
+  // throws fromCameraInfo's error (its calibration is not parsed again while
+  // it repeats), and that frame has no model until a good one.
   bool update(const sensor_msgs::CameraInfo& msg) {
-    const auto it = models_.find(msg.header.frame_id);
+    const std::string& frame = msg.header.frame_id;
+    const auto it = models_.find(frame);
     if (it != models_.end() && sameCalibration(it->second.first, msg)) return false;
+    const auto bad = refused_.find(frame);
+    if (bad != refused_.end() && sameCalibration(bad->second.first, msg)) throw CalibrationError(bad->second.second);
     try {
-      models_[msg.header.frame_id] = {msg, std::make_shared<const CameraModel>(fromCameraInfo(msg))};
-    } catch (...) {
-      models_.erase(msg.header.frame_id);
+      models_[frame] = {msg, std::make_shared<const CameraModel>(fromCameraInfo(msg))};
+      refused_.erase(frame);
+    } catch (const std::exception& e) {
+      models_.erase(frame);
+      refused_[frame] = {msg, e.what()};
       throw;
     }
     return true;
   }
 
+  // The model of `info` (after update()) when it describes images of width x
+  // height, else null and *why: "no camera_info on <topic>", "camera_info WxH
+  // does not fit the image", or "camera_info refused: <error>".
+  std::shared_ptr<const CameraModel> fitting(const sensor_msgs::CameraInfoConstPtr& info, int width, int height,
+                                             const std::string& topic, std::string* why) {
+    if (!info) return *why = "no camera_info on " + topic, nullptr;
+    if (int(info->width) != width || int(info->height) != height) {
+      *why = "camera_info " + std::to_string(info->width) + "x" + std::to_string(info->height) +
+             " does not fit the image (" + std::to_string(width) + "x" + std::to_string(height) + ")";
+      return nullptr;
+    }
+    try {
+      update(*info);
+    } catch (const std::exception& e) {
+      return *why = std::string("camera_info refused: ") + e.what(), nullptr;
+    }
+    return find(info->header.frame_id);
+  }
+
  private:
   std::map<std::string, std::pair<sensor_msgs::CameraInfo, std::shared_ptr<const CameraModel>>> models_;
+  std::map<std::string, std::pair<sensor_msgs::CameraInfo, std::string>> refused_;  // the last bad one, its error
 };
 
 // The images of a stage (the TSDF's depth frames) with the camera model of

@@ -33,6 +33,10 @@ class FilePathServices {
   void add(const std::string& name, const std::string& what, Access access,
            std::function<void(const std::string& path)> fn);
 
+  // Advertises ~name as a std_srvs/Trigger running fn under the same lock and
+  // log ("<what>: done", or "<what> failed: <error>", counted).
+  void addTrigger(const std::string& name, const std::string& what, std::function<void()> fn);
+
   // Runs one request as the service does (also for tests and tools).
   void run(fisheye_mapping::FilePath::Response& res, const std::string& requested, const std::string& what,
            Access access, const std::function<void(const std::string&)>& fn);

@@ -32,6 +32,7 @@
 #include <mutex>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <image_transport/single_subscriber_publisher.h>
@@ -62,6 +63,9 @@ class NodeletLogger {
   void info(const std::string& text) const { log(ros::console::levels::Info, text); }
   void warn(const std::string& text) const { log(ros::console::levels::Warn, text); }
   void error(const std::string& text) const { log(ros::console::levels::Error, text); }
+  /// error() or info(); once roscpp has shut down (a save on shutdown), on
+  /// stderr as "[ERROR] [<name>]: <text>".
+  void say(bool error, const std::string& text) const;
   /// At most once per `period_s` of ROS time (NODELET_*_THROTTLE's clock) for
   /// each `key` of this logger.
   void throttled(ros::console::Level level, double period_s, const std::string& key, const std::string& text);
@@ -181,6 +185,27 @@ std::optional<C> checkedReconfigure(Cfg& request, const ParamTable<C>& table, co
     log.error(what + " refused, running values kept: " + error);
   }
   return next;
+}
+
+/// As above for a stage whose run-time parameters come from two tables (the
+/// TSDF's map config and node options): both are checked before either
+/// changes, and a refusal writes both tables' running values back.
+template <class C1, class C2, class Cfg>
+std::optional<std::pair<C1, C2>> checkedReconfigure(Cfg& request, const ParamTable<C1>& table1, const C1& running1,
+                                                    const ParamTable<C2>& table2, const C2& running2,
+                                                    StageMonitor& monitor, const NodeletLogger& log,
+                                                    const std::string& what) {
+  dynamic_reconfigure::Config values;
+  request.__toMessage__(values);
+  std::string error;
+  std::optional<C1> next1 = reconfigured(table1, running1, values, error);
+  std::optional<C2> next2;
+  if (next1) next2 = reconfigured(table2, running2, values, error);
+  if (next1 && next2) return std::make_pair(std::move(*next1), std::move(*next2));
+  keepRunningValues(request, std::make_pair(std::cref(table1), running1), std::make_pair(std::cref(table2), running2));
+  monitor.error(what + " refused: " + error);
+  log.error(what + " refused, running values kept: " + error);
+  return std::nullopt;
 }
 
 template <class F>

@@ -65,23 +65,6 @@ struct CameraInfoRigKey {
   bool describes(const std::vector<std::string>& names, const std::vector<sensor_msgs::CameraInfo>& infos) const;
 };
 
-/// The camera a depth map's CameraInfo describes, for the vehicle tracker;
-/// rebuilt only when the message changes. Not thread-safe.
-class CameraFromInfo {
- public:
-  /// The camera of `info` when it fits a depth map of width x height, else
-  /// nullptr with *why ("no camera_info on <topic>", "camera_info WxH does not
-  /// fit the depth", "camera_info refused: <error>", each ending ": every
-  /// vehicle masked").
-  const CameraModel* get(const sensor_msgs::CameraInfoConstPtr& info, int width, int height, const std::string& topic,
-                         std::string* why);
-
- private:
-  sensor_msgs::CameraInfoConstPtr used_;
-  std::optional<CameraModel> camera_;
-  std::string error_;
-};
-
 /// depth_masked/vehicles: each detection of `dets` with its decision (the
 /// decisions in the message's order; a detection without one is left out),
 /// masked or not (masksVehicle), and the regions parked vehicles left

@@ -6,8 +6,10 @@
 //   tsdf/cloud      PointCloud2 (latched) of the surface, when blocks changed
 //                   or after a reset;
 //   tsdf/occupancy  OccupancyGrid (latched) around the vehicle's last fused
-//                   pose, while someone subscribes.
-// The caller holds the stage's lock around every call but the constructor.
+//                   pose, while someone subscribes;
+//   tsdf/fusion_done  FrameDone for each depth frame, fused or skipped.
+// The caller holds the stage's lock around every call but the constructor
+// and frameDone().
 #ifndef FISHEYE_MAPPING_ROS_TSDF_TOPICS_H_
 #define FISHEYE_MAPPING_ROS_TSDF_TOPICS_H_
 
@@ -17,6 +19,7 @@
 
 #include <ros/node_handle.h>
 #include <ros/single_subscriber_publisher.h>
+#include <std_msgs/Header.h>
 
 #include "fisheye_mapping/core/tsdf/fusion_stage.h"
 #include "fisheye_mapping/ros/mesh_markers.h"
@@ -38,6 +41,9 @@ class TsdfTopics {
   void sendAll(TsdfFusionStage& stage, const ros::SingleSubscriberPublisher& subscriber);
   // The obstacle grid, when someone subscribes and the stage has a pose.
   void publishOccupancy(TsdfFusionStage& stage);
+  // tsdf/fusion_done: this depth frame is finished with (for the paced
+  // player), fused or skipped because of `skipped_because` (non-empty).
+  void frameDone(const std_msgs::Header& header, const std::string& skipped_because);
   // Blocks the stage re-meshed outside publish() (exports, a new min_observations).
   void markChanged(const std::vector<BlockIndex>& blocks) { markers_.markChanged(blocks); }
   size_t numShown() const { return markers_.numShown(); }
@@ -47,7 +53,7 @@ class TsdfTopics {
 
   std::string frame_;
   MeshMarkerStream markers_;
-  ros::Publisher mesh_, cloud_, occupancy_;
+  ros::Publisher mesh_, cloud_, occupancy_, done_;
 };
 
 }  // namespace fisheye_mapping

@@ -11,6 +11,13 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double msSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
 
+// Offline: no map file, and frame sets come in the order given (no time resets).
+TsdfStageOptions offlineTsdfOptions() {
+  TsdfStageOptions o;
+  o.time_reset_threshold = 0.0;
+  return o;
+}
+
 }  // namespace
 
 void FrameSetMapperConfig::validate() const {
@@ -36,8 +43,7 @@ FrameSetMapper::FrameSetMapper(const Rig& rig, const FrameSetMapperConfig& confi
     : config_(config),
       depth_(rig, config.depth),
       detector_(std::move(detector)),
-      map_(std::make_unique<TsdfMap>(config.tsdf)),
-      mesher_(config.tsdf.min_observations),
+      tsdf_(std::make_unique<TsdfFusionStage>(config.tsdf, offlineTsdfOptions(), nullptr)),
       motion_(config.mask.motion) {
   config_.validate();
 }
@@ -168,20 +174,21 @@ FrameSetResult FrameSetMapper::maskAndFuse(FrameSetResult r, const ImageBoxes& u
   r.masked_pixels = size_t(cv::countNonZero(r.mask));
   r.ms.mask_ms = msSince(tm);
   const auto tf = Clock::now();
-  // Parked vehicles that drove off: their regions are carved free.
-  const std::vector<Eigen::AlignedBox3d> carve = tracked ? motion_.ghostRegions() : std::vector<Eigen::AlignedBox3d>();
-  // The intensity of the map: the reference image, when it is one grey image of the camera's size.
-  const bool grey = image.type() == CV_8UC1 && image.cols == ref.model.width() && image.rows == ref.model.height();
-  r.fusion = map_->integrate(depth, ref.model, T_W_B * ref.T_base_cam, T_W_B.translation(), carve,
-                             grey ? image : cv::Mat());
-  if (++frame_sets_ % size_t(config_.mesh_every) == 0) mesher_.update(*map_);
+  // As the TSDF nodelet: the grey image (the map's intensity, when it is one
+  // grey image) and carve regions (parked vehicles that drove off) of the
+  // frame set's stamp go to the stage before its depth.
+  const std::int64_t stamp_ns = std::isfinite(stamp_s) ? std::llround(stamp_s * 1e9) : (next_unstamped_ns_ += 1000000000);
+  if (image.type() == CV_8UC1) tsdf_->addGrey(stamp_ns, image);
+  tsdf_->setCarve(tracked ? motion_.ghostRegions() : std::vector<Eigen::AlignedBox3d>(), stamp_ns);
+  r.fusion = tsdf_->fuse(depth, ref.model, T_W_B * ref.T_base_cam, T_W_B, stamp_ns).stats;
+  if (++frame_sets_ % size_t(config_.mesh_every) == 0) tsdf_->updateMesh();
   r.ms.fuse_ms = msSince(tf);
   return r;
 }
 
 void FrameSetMapper::finish() {
   if (pending_.valid()) pending_.wait();  // its result stays for flush()
-  mesher_.update(*map_);
+  tsdf_->updateMesh();
 }
 
 }  // namespace fisheye_mapping

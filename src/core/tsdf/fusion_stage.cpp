@@ -15,11 +15,14 @@ constexpr std::int64_t kCarveWithinNs = 2000000000;  // carve regions apply to f
 TsdfFusionStage::TsdfFusionStage(const TsdfConfig& config, const TsdfStageOptions& options, Log log)
     : live_(config),
       options_(options),
+      log_(log),
       map_(config),
       mesher_(config.min_observations),
       session_(options.map_file, std::move(log)),
       timeline_(1, options.time_reset_threshold) {
   options_.occupancy.validate();
+  // Without a log, the map's own report (stderr) stays.
+  if (log_) map_.setSwapErrorCallback([this](bool lost, const std::string& message) { swapError(lost, message); });
   if (session_.start(map_, options.reload_map_on_start)) resetMesh();
 }
 
@@ -66,6 +69,11 @@ TsdfFusionStage::Fused TsdfFusionStage::fuse(const cv::Mat& depth, const CameraM
   std::vector<Eigen::AlignedBox3d> carve;
   if (!carve_.empty() && std::llabs(stamp_ns - carve_stamp_ns_) <= kCarveWithinNs) carve = carve_;
   out.stats = map_.integrate(depth, camera, T_W_C, T_W_B.translation(), carve, grey);
+  if (out.stats.blocks_lost && log_) {
+    log_(true, "frame " + std::to_string(stamp_ns * 1e-9) + ": " + std::to_string(out.stats.blocks_lost) +
+                   " swapped blocks could not be read back and are lost (" + std::to_string(map_.numLostBlocks()) +
+                   " so far)");
+  }
   out.with_intensity = !grey.empty();
   frames_with_intensity_ += out.with_intensity;
   last_T_W_B_ = T_W_B;
@@ -73,6 +81,14 @@ TsdfFusionStage::Fused TsdfFusionStage::fuse(const cv::Mat& depth, const CameraM
   ++frames_fused_;
   session_.changed();
   return out;
+}
+
+void TsdfFusionStage::swapError(bool lost, const std::string& message) {
+  if (lost) return log_(true, message);  // once per block: it is gone afterwards
+  const auto now = std::chrono::steady_clock::now();
+  if (last_swap_log_ != std::chrono::steady_clock::time_point{} && now - last_swap_log_ < std::chrono::seconds(5)) return;
+  last_swap_log_ = now;
+  log_(true, message + " (" + std::to_string(map_.numSwapWriteFailures()) + " swap writes failed so far)");
 }
 
 void TsdfFusionStage::addGrey(std::int64_t stamp_ns, const cv::Mat& grey) {

@@ -1,6 +1,6 @@
 // Stage parameters from any key/value source (no ROS): one reading of each
 // stage's parameter names serves both the nodelets (ROS parameter server) and
-// the offline tools (YAML files such as config/plane_sweep_depth.yaml).
+// the offline tools (YAML files such as config/depth.yaml).
 #ifndef FISHEYE_MAPPING_CORE_COMMON_PARAMS_H_
 #define FISHEYE_MAPPING_CORE_COMMON_PARAMS_H_
 

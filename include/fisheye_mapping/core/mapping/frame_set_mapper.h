@@ -1,7 +1,7 @@
 // The mapping pipeline for one frame set at a time (paper Sec. III): depth of
 // the reference camera (DepthStage), moving objects found (Detector) or given
 // (e.g. a drive's ground-truth boxes) and masked out (maskDepthBoxes), and the
-// masked depth fused into the TSDF (TsdfMap, TsdfMesher), with per-stage
+// masked depth fused into the TSDF (TsdfFusionStage, the TSDF nodelet's core), with per-stage
 // timings. The offline tools (offline_mapper, the evaluation) run it; the
 // nodelets run the same stage objects with the same configs, one stage each,
 // so that what the evaluation measures is what vehicle.launch runs. No ROS.
@@ -22,8 +22,7 @@
 #include "fisheye_mapping/core/depth/depth_stage.h"
 #include "fisheye_mapping/core/detection/depth_mask.h"
 #include "fisheye_mapping/core/detection/detector.h"
-#include "fisheye_mapping/core/tsdf/tsdf_map.h"
-#include "fisheye_mapping/core/tsdf/tsdf_mesher.h"
+#include "fisheye_mapping/core/tsdf/fusion_stage.h"
 
 namespace fisheye_mapping {
 
@@ -118,8 +117,8 @@ class FrameSetMapper {
   const FrameSetMapperConfig& config() const { return config_; }
   const DepthStage& depthStage() const { return depth_; }
   bool hasDetector() const { return detector_ != nullptr; }
-  TsdfMap& map() { return *map_; }
-  TsdfMesher& mesher() { return mesher_; }
+  TsdfMap& map() { return tsdf_->map(); }
+  const TsdfMesher& mesher() const { return tsdf_->mesher(); }
   size_t frameSets() const { return frame_sets_.load(); }
 
  private:
@@ -136,8 +135,10 @@ class FrameSetMapper {
   FrameSetMapperConfig config_;
   DepthStage depth_;
   std::unique_ptr<Detector> detector_;
-  std::unique_ptr<TsdfMap> map_;
-  TsdfMesher mesher_;
+  // The TSDF nodelet's core stage: map, mesh, the grey image and carve
+  // regions of a frame set's stamp (no map file, no time resets: offline).
+  std::unique_ptr<TsdfFusionStage> tsdf_;
+  std::int64_t next_unstamped_ns_ = 0;  // stamps of frame sets given without one
   VehicleMotionTracker motion_;
   std::atomic<size_t> frame_sets_{0};
   // submit(): the previous frame set's detection and masking + fusion.

@@ -16,6 +16,7 @@
 #define FISHEYE_MAPPING_CORE_TSDF_FUSION_STAGE_H_
 
 #include <array>
+#include <chrono>
 #include <cstdint>
 #include <deque>
 #include <memory>
@@ -116,9 +117,11 @@ class TsdfFusionStage {
 
  private:
   void resetMesh();
+  void swapError(bool lost, const std::string& message);
 
   TsdfConfig live_;
   TsdfStageOptions options_;
+  Log log_;
   TsdfMap map_;
   TsdfMesher mesher_;
   MapSession session_;
@@ -135,6 +138,7 @@ class TsdfFusionStage {
   size_t frames_fused_ = 0, frames_with_intensity_ = 0;
   std::array<size_t, 3> occupancy_cells_{};  // occupied / free / unknown of the last grid
   bool mesh_reset_ = false, cloud_stale_ = false;
+  std::chrono::steady_clock::time_point last_swap_log_{};  // failed swap writes are logged every 5 s at most
 };
 
 }  // namespace fisheye_mapping

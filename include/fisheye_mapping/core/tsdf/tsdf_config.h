@@ -1,7 +1,7 @@
 // Configuration of the TSDF map (paper Sec. III-C): voxel size and
 // truncation, the local-map box, swapping, the integration backend and its
 // threads. Plain data; validate() checks it, fromParams() reads it from the
-// parameter names of config/tsdf_fusion.yaml.
+// parameter names of config/tsdf.yaml.
 #ifndef FISHEYE_MAPPING_CORE_TSDF_TSDF_CONFIG_H_
 #define FISHEYE_MAPPING_CORE_TSDF_TSDF_CONFIG_H_
 
@@ -80,7 +80,7 @@ struct TsdfConfig {
   // may change while running); docs/parameters.md is generated from it.
   static const ParamTable<TsdfConfig>& params();
 
-  // The parameter names of config/tsdf_fusion.yaml over `base` (the
+  // The parameter names of config/tsdf.yaml over `base` (the
   // defaults above when not given); validated (std::invalid_argument naming
   // the field or parameter). Over a running config, a source holding only some
   // names (a dynamic_reconfigure update) changes just those.

@@ -289,6 +289,6 @@ TEST(FrameSyncNode, ReconfiguredPolicyPairsASpreadSet) {
 
 int main(int argc, char** argv) {
   testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "test_frame_sync_node");
+  ros::init(argc, argv, "test_sync_node");
   return RUN_ALL_TESTS();
 }

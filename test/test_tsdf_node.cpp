@@ -678,6 +678,6 @@ TEST_F(TsdfFusionNode, RigFromCameraInfoGivesTheSameMap) {
 
 int main(int argc, char** argv) {
   testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "test_tsdf_fusion_node");
+  ros::init(argc, argv, "test_tsdf_node");
   return RUN_ALL_TESTS();
 }

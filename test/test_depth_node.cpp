@@ -455,7 +455,7 @@ TEST(PlaneSweepDepthNode, SelfCalibrationStateAndSaveService) {
   const std::filesystem::path folder =
       std::filesystem::path(ros_home && *ros_home ? ros_home : std::string(std::getenv("HOME")) + "/.ros") /
       "fisheye_mapping";
-  const std::string subfolder = "fm_test_plane_sweep_node_" + std::to_string(getpid());
+  const std::string subfolder = "fm_test_depth_node_" + std::to_string(getpid());
   fisheye_mapping::FilePath srv;
   srv.request.path = subfolder + "/camchain.yaml";
   ASSERT_TRUE(ros::service::waitForService("depth/save_calibration", ros::Duration(10.0)));
@@ -491,7 +491,7 @@ TEST(PlaneSweepDepthNode, SelfCalibrationStateAndSaveService) {
 
 int main(int argc, char** argv) {
   testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "test_plane_sweep_node");
+  ros::init(argc, argv, "test_depth_node");
   ros::AsyncSpinner spinner(1);
   spinner.start();
   return RUN_ALL_TESTS();
