@@ -53,6 +53,7 @@
 #include "cli.h"
 #include "fisheye_mapping/core/eval/depth_consistency.h"
 #include "fisheye_mapping/core/depth/depth_image.h"
+#include "fisheye_mapping/core/common/param_table.h"
 #include "fisheye_mapping/core/depth/depth_stage.h"
 #include "fisheye_mapping/core/eval/depth_error.h"
 #include "fisheye_mapping/core/depth/plane_sweep.h"
@@ -69,7 +70,7 @@ const char* kUsage =
     "usage: depth_eval synthetic --camchain F --mount F --out DIR [--preset urban|forest] [--seed N]\n"
     "                  [--frames N] [--start S] [--step S] [--backend auto|native|opencl|cpu] [--device D]\n"
     "                  [--max-range M] [--realistic] [--sweep-camchain F] [--every-plane]\n"
-    "                  [--wall-planes N] [--cloudy-sky]\n"
+    "                  [--wall-planes N] [--cloudy-sky] [--set KEY=VALUE]...\n"
     "       depth_eval vcharge --data DIR --camera left|right --out DIR [--device D] [--ground-z Z]\n"
     "                  [--label TEXT]\n"
     "       depth_eval vcharge-check --data DIR --camera left|right --depth-k F --depth-k1 F --out DIR\n"
@@ -87,6 +88,8 @@ const char* kUsage =
     "                      search): the reference for what the stage's less work costs\n"
     "    --wall-planes N   wall planes on each side (depth wall_planes; default the sweep's)\n"
     "    --cloudy-sky      an overcast sky as contrasted as a real one (make_drive --cloudy-sky)\n"
+    "    --set KEY=VALUE   a depth-stage parameter over both sweeps' files (repeatable; e.g.\n"
+    "                      --set filter_infinity=true); an unknown key names the known ones\n"
     "    The sweeps: config/depth.yaml (the depth stage's defaults) with the filters of\n"
     "    each figure; \"vehicle.yaml\" rows: that file with config/vehicle.yaml's depth section over\n"
     "    it, as vehicle.launch runs the depth stage.\n"
@@ -107,6 +110,7 @@ struct SyntheticOptions {
   fm::SweepBackendType backend = fm::SweepBackendType::Auto;
   std::string device;              // empty: the sweep's default device
   std::optional<int> wall_planes;  // unset: the sweep's
+  std::vector<std::pair<std::string, std::string>> sets;  // --set KEY=VALUE, over both sweeps' files
   bool realistic = false, every_plane = false, cloudy_sky = false;
 };
 
@@ -230,6 +234,8 @@ fm::PlaneSweepConfig stageSweep(const SyntheticOptions& o, bool vehicle) {
       for (const auto& kv : section) y[kv.first.as<std::string>()] = kv.second;
     origin += " + config/vehicle.yaml";
   }
+  for (const auto& [key, value] : o.sets) y[key] = YAML::Load(value);
+  if (!o.sets.empty()) origin += " + --set";
   fm::PlaneSweepConfig c = fm::DepthStageConfig::fromParams(fm::YamlParams(y, origin)).sweep;
   c.backend = o.backend;
   c.device = o.device;
@@ -901,7 +907,13 @@ SyntheticOptions parseSynthetic(int argc, char** argv) {
     else if (a == "--realistic") o.realistic = true;
     else if (a == "--every-plane") o.every_plane = true;
     else if (a == "--cloudy-sky") o.cloudy_sky = true;
-    else if (a == "--backend") {
+    else if (a == "--set") {
+      const std::string kv = next();
+      const size_t eq = kv.find('=');
+      if (eq == std::string::npos || eq == 0 || eq + 1 == kv.size())
+        throw cli::UsageError("--set needs KEY=VALUE, got '" + kv + "'");
+      o.sets.emplace_back(kv.substr(0, eq), kv.substr(eq + 1));
+    } else if (a == "--backend") {
       const std::string b = next();
       try {
         o.backend = fm::parseSweepBackend(b);
@@ -913,6 +925,13 @@ SyntheticOptions parseSynthetic(int argc, char** argv) {
   });
   require("--camchain", o.camchain);
   require("--mount", o.mount);
+  std::vector<std::string> set_keys;
+  for (const auto& kv : o.sets) set_keys.push_back(kv.first);
+  try {
+    fm::DepthStageConfig::params().requireKnown(set_keys, "--set");
+  } catch (const std::invalid_argument& e) {
+    throw cli::UsageError(e.what());
+  }
   require("--out", o.out);
   cli::requireInputFile("--camchain", o.camchain);
   cli::requireInputFile("--mount", o.mount);
