@@ -5,8 +5,8 @@
 // Subscribes  depth_masked/image (32FC1 range along the ray, NaN invalid), through a
 //             tf2 MessageFilter (a frame waits for its pose); with ~rig_source
 //             camera_info, depth_masked/camera_info gives each frame's camera model
-//             (frames before their first CameraInfo wait for it: the last kMaxHeld,
-//             kMaxHoldS at most; others are dropped, "no camera_info yet");
+//             (frames before their first CameraInfo wait for it: the last 8,
+//             2 s at most, ImagesWithModels; others are dropped, "no camera_info yet");
 //             image (the reference camera, for the map's intensity; ~intensity);
 //             depth_masked/vehicles (carve regions of parked vehicles that drove off).
 // Publishes   tsdf/mesh (MarkerArray, changed blocks; a late subscriber gets all),
@@ -56,8 +56,6 @@ class TsdfNodelet : public nodelet::Nodelet {
 
  private:
   using ImagePtr = sensor_msgs::ImageConstPtr;
-  static constexpr size_t kMaxHeld = 8;     // depth frames waiting for their first CameraInfo (rig_source camera_info)
-  static constexpr double kMaxHoldS = 2.0;  // wall time one waits at most
 
   void onInit() override {
     ros::NodeHandle& nh = getNodeHandle();
@@ -78,8 +76,7 @@ class TsdfNodelet : public nodelet::Nodelet {
       cfg = TsdfConfig::fromParams(RosParams(pnh));
       images_ = std::make_unique<ImagesWithModels>(
           opts_.rig.fromCameraInfo(), opts_.rig.fromCameraInfo() ? Rig() : loadRigFromParams(pnh),
-          [this](const ImagePtr& msg, const std::shared_ptr<const CameraModel>& model) { processDepth(msg, model); },
-          kMaxHeld, kMaxHoldS);
+          [this](const ImagePtr& msg, const std::shared_ptr<const CameraModel>& model) { processDepth(msg, model); });
       monitor_ = std::make_unique<StageMonitor>(nh, pnh, "tsdf");
       TsdfStageOptions so{opts_.save_map_on_shutdown.empty() ? std::string()  // inside the save folder, else refused
                                                              : confineSavePath(opts_.save_map_on_shutdown, save_folder_),
@@ -235,11 +232,10 @@ class TsdfNodelet : public nodelet::Nodelet {
       return why;
     };
     const std::string frame = msg->header.frame_id;
-    if (!model && opts_.rig.fromCameraInfo()) {
-      return skip("no camera_info yet", "no camera_info for frame '" + frame + "' yet (on " +
-                                            getNodeHandle().resolveName("depth_masked/camera_info") + ")");
+    if (!model) {
+      const auto [drop, why] = images_->noModel(frame, getNodeHandle().resolveName("depth_masked/camera_info"));
+      return skip(drop, why);
     }
-    if (!model) return skip("not a rig camera", "frame '" + frame + "' is not a camera of the rig");
     try {
       checkDepthImage(*msg, getNodeHandle().resolveName("depth_masked/image"));
     } catch (const ImageConversionError& e) {

@@ -71,7 +71,7 @@ const char* kUsage =
     "                  [--frames N] [--start S] [--step S] [--backend auto|native|opencl|cpu] [--device D]\n"
     "                  [--max-range M] [--realistic] [--sweep-camchain F] [--every-plane]\n"
     "                  [--wall-planes N] [--cloudy-sky] [--set KEY=VALUE]...\n"
-    "       depth_eval vcharge --data DIR --camera left|right --out DIR [--device D] [--ground-z Z]\n"
+    "       depth_eval vcharge --data DIR --camera left|right --out DIR [--device D] [--ground-z Z] [--set KEY=VALUE]...\n"
     "                  [--label TEXT]\n"
     "       depth_eval vcharge-check --data DIR --camera left|right --depth-k F --depth-k1 F --out DIR\n"
     "                  [--k K] [--ground-z Z] [--label TEXT]\n"
@@ -116,6 +116,7 @@ struct SyntheticOptions {
 
 struct VchargeOptions {
   std::string data, camera, out, device, depth_k, depth_k1, label;
+  std::vector<std::pair<std::string, std::string>> sets;  // --set KEY=VALUE over the sweep below
   double ground_z = 0.0;  // set to kVchargeGroundZ before the options are read
   int k = 2;
 };
@@ -782,15 +783,19 @@ void reportVcharge(const std::string& out, const std::string& camera, const std:
 
 
 // PlaneSweepLib's reference run on the V-Charge data, as our sweep's settings.
-fm::PlaneSweepConfig vchargeSweepConfig(const std::string& device) {
+fm::PlaneSweepConfig vchargeSweepConfig(const VchargeOptions& o) {
   fm::PlaneSweepConfig config;
+  const std::string& device = o.device;
   config.device = device;
   config.ground_planes = 0;  // the system frame's ground is not known here
   config.near = 0.4;  // PlaneSweepLib's reference run: 0.4 m (the camera looks down at the road)
   config.far = 100.0;
   config.min_parallax_px = 0.0;  // ~0.2 m between frames: small but all we have
   config.aggregation = fm::SweepAggregation::BestK;  // frames before and after: one of them sees occluded points
-  return config;
+  if (o.sets.empty()) return config;
+  YAML::Node y(YAML::NodeType::Map);
+  for (const auto& [key, value] : o.sets) y[key] = YAML::Load(value);
+  return fm::PlaneSweepConfig::params().read(fm::YamlParams(y, "--set"), config);
 }
 
 // Depth of frame `ref` supported by the two frames before and after it.
@@ -833,7 +838,7 @@ cv::Mat vchargeComparison(const VchargeOptions& o, const cv::Mat& image, const f
 // k + 1 = 3 with 1, 2, 4, 5 (the consistency check).
 int runVcharge(const VchargeOptions& o) {
   const VchargeSequence s = loadVcharge(o.data, o.camera, 6, true);
-  const fm::PlaneSweepConfig config = vchargeSweepConfig(o.device);
+  const fm::PlaneSweepConfig config = vchargeSweepConfig(o);
   fm::PlaneSweep sweep(config);
   const int ref = 2;
   const fm::DepthResult r = vchargeDepth(sweep, s, ref);
@@ -884,6 +889,26 @@ int runVchargeCheck(const VchargeOptions& o) {
 // ---------------------------------------------------------------------------
 // The command line: each mode's options, every value checked here (cli.h).
 
+// One --set KEY=VALUE into `sets`.
+void addSet(const std::string& kv, std::vector<std::pair<std::string, std::string>>* sets) {
+  const size_t eq = kv.find('=');
+  if (eq == std::string::npos || eq == 0 || eq + 1 == kv.size())
+    throw cli::UsageError("--set needs KEY=VALUE, got '" + kv + "'");
+  sets->emplace_back(kv.substr(0, eq), kv.substr(eq + 1));
+}
+
+// The keys of `sets` are declared in `table`, else a usage error naming the known ones.
+template <class C>
+void requireKnownSets(const fm::ParamTable<C>& table, const std::vector<std::pair<std::string, std::string>>& sets) {
+  std::vector<std::string> keys;
+  for (const auto& kv : sets) keys.push_back(kv.first);
+  try {
+    table.requireKnown(keys, "--set");
+  } catch (const std::invalid_argument& e) {
+    throw cli::UsageError(e.what());
+  }
+}
+
 // "--name is required" when `value` is empty.
 void require(const std::string& option, const std::string& value) {
   if (value.empty()) throw cli::UsageError(option + " is required");
@@ -907,13 +932,8 @@ SyntheticOptions parseSynthetic(int argc, char** argv) {
     else if (a == "--realistic") o.realistic = true;
     else if (a == "--every-plane") o.every_plane = true;
     else if (a == "--cloudy-sky") o.cloudy_sky = true;
-    else if (a == "--set") {
-      const std::string kv = next();
-      const size_t eq = kv.find('=');
-      if (eq == std::string::npos || eq == 0 || eq + 1 == kv.size())
-        throw cli::UsageError("--set needs KEY=VALUE, got '" + kv + "'");
-      o.sets.emplace_back(kv.substr(0, eq), kv.substr(eq + 1));
-    } else if (a == "--backend") {
+    else if (a == "--set") addSet(next(), &o.sets);
+    else if (a == "--backend") {
       const std::string b = next();
       try {
         o.backend = fm::parseSweepBackend(b);
@@ -925,13 +945,7 @@ SyntheticOptions parseSynthetic(int argc, char** argv) {
   });
   require("--camchain", o.camchain);
   require("--mount", o.mount);
-  std::vector<std::string> set_keys;
-  for (const auto& kv : o.sets) set_keys.push_back(kv.first);
-  try {
-    fm::DepthStageConfig::params().requireKnown(set_keys, "--set");
-  } catch (const std::invalid_argument& e) {
-    throw cli::UsageError(e.what());
-  }
+  requireKnownSets(fm::DepthStageConfig::params(), o.sets);
   require("--out", o.out);
   cli::requireInputFile("--camchain", o.camchain);
   cli::requireInputFile("--mount", o.mount);
@@ -951,6 +965,7 @@ VchargeOptions parseVcharge(const std::string& mode, int argc, char** argv) {
     else if (a == "--label") o.label = next();
     else if (a == "--ground-z") o.ground_z = cli::parseDouble(a, next(), -10.0, 10.0);
     else if (!check && a == "--device") o.device = next();
+    else if (!check && a == "--set") addSet(next(), &o.sets);
     else if (check && a == "--depth-k") o.depth_k = next();
     else if (check && a == "--depth-k1") o.depth_k1 = next();
     else if (check && a == "--k") o.k = static_cast<int>(cli::parseInt(a, next(), 0, 1000000));
@@ -959,6 +974,7 @@ VchargeOptions parseVcharge(const std::string& mode, int argc, char** argv) {
   });
   require("--data", o.data);
   require("--camera", o.camera);
+  requireKnownSets(fm::PlaneSweepConfig::params(), o.sets);
   require("--out", o.out);
   if (check) {
     require("--depth-k", o.depth_k);

@@ -121,6 +121,13 @@ class ImagesWithModels {
     processAll(locked([&] { return waiting_.expire(now(), known()); }));
   }
 
+  // Why an image of `frame` came without a model: {the drop reason the
+  // diagnostics count, a description}; `info_topic` is where CameraInfo comes.
+  std::pair<std::string, std::string> noModel(const std::string& frame, const std::string& info_topic) const {
+    if (from_camera_info_) return {"no camera_info yet", "no camera_info for frame '" + frame + "' yet (on " + info_topic + ")"};
+    return {"not a rig camera", "frame '" + frame + "' is not a camera of the rig"};
+  }
+
   size_t waiting() {
     std::lock_guard<std::mutex> lock(mutex_);
     return waiting_.size();
