@@ -293,6 +293,10 @@ def main():
     # Timing
     md.append("### Timing")
     md.append("")
+    md.append("This run's times, for how the stages shared the run (they overlap on the CPU, beside the run's "
+              "other work); the speed of the code is measured in one place, "
+              "[benchmarks.md](benchmarks.md) (`scripts/bench/report`).")
+    md.append("")
     for preset in PRESETS[:1]:
         for det, name in DETECTORS[1:]:
             p = os.path.join(o, preset, f"map_{det}", "timings.md")
