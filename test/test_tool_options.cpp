@@ -244,7 +244,7 @@ TEST(ToolOptions, DepthEvalRefusesMalformedNumbers) {
       {" --seed 1.5", "depth_eval: --seed needs a whole number, got '1.5'\n"},
       {" --wall-planes 2x", "depth_eval: --wall-planes needs a whole number, got '2x'\n"},
       {" --step 1s", "depth_eval: --step needs a number, got '1s'\n"},
-      {" --set filter_infinity", "depth_eval: --set needs KEY=VALUE, got 'filter_infinity'\n"},
+      {" --set filter_infinity", "depth_eval: --set expects NAME=VALUE, got 'filter_infinity'\n"},
       {" --set filter_infinty=true", "depth_eval: --set: unknown parameter 'filter_infinty' in section 'depth'"},
   };
   for (const auto& c : cases) {

@@ -20,44 +20,42 @@ void FilePathServices::addTrigger(const std::string& name, const std::string& wh
   using Req = std_srvs::Trigger::Request;
   using Res = std_srvs::Trigger::Response;
   servers_.push_back(pnh_.advertiseService<Req, Res>(name, [this, what, fn](Req&, Res& res) {
-    std::lock_guard<std::mutex> lock(mutex_);
-    res.success = false;
-    if (!ready_()) return res.message = "the stage did not start (see its error log)", true;
-    try {
+    res.success = attempt(&res.message, what + " failed", [&] {
       fn();
-      res.success = true;
-      res.message = what + ": done";
-      log_(false, res.message);
-    } catch (const std::exception& e) {
-      res.message = what + " failed: " + e.what();
-      log_(true, res.message + " (" + std::to_string(++failures_) + " failed requests so far)");
-    }
+      return what + ": done";
+    });
     return true;
   }));
 }
 
 void FilePathServices::run(fisheye_mapping::FilePath::Response& res, const std::string& requested,
                            const std::string& what, Access access, const std::function<void(const std::string&)>& fn) {
-  std::lock_guard<std::mutex> lock(mutex_);
-  res.success = false;
-  if (!ready_()) {
-    res.message = "the stage did not start (see its error log)";
-    return;
-  }
-  try {
+  res.success = attempt(&res.message, what + " '" + requested + "' failed", [&] {
     const std::string path = access == Access::kSave ? confineSavePath(requested, folder_)
                                                      : tsdf_node::inputPath(requested, folder_);
     fn(path);
-    res.success = true;
-    res.message = what + " " + path + ": done";
-    log_(false, res.message);
-  } catch (const std::exception& e) {
-    res.message = what + " '" + requested + "' failed: " + e.what();
-    log_(true, res.message + " (" + std::to_string(++failures_) + " failed requests so far)");
-  } catch (...) {
-    res.message = what + " '" + requested + "' failed: unknown exception";
-    log_(true, res.message + " (" + std::to_string(++failures_) + " failed requests so far)");
+    return what + " " + path + ": done";
+  });
+}
+
+bool FilePathServices::attempt(std::string* reply, const std::string& failure,
+                               const std::function<std::string()>& fn) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (!ready_()) {
+    *reply = "the stage did not start (see its error log)";
+    return false;
   }
+  try {
+    *reply = fn();
+    log_(false, *reply);
+    return true;
+  } catch (const std::exception& e) {
+    *reply = failure + ": " + e.what();
+  } catch (...) {
+    *reply = failure + ": unknown exception";
+  }
+  log_(true, *reply + " (" + std::to_string(++failures_) + " failed requests so far)");
+  return false;
 }
 
 }  // namespace fisheye_mapping

@@ -27,6 +27,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <system_error>
 #include <vector>
 
@@ -152,6 +153,14 @@ inline double parsePositive(const std::string& option, const std::string& text, 
   const double v = parseDouble(option, text, -std::numeric_limits<double>::max(), hi);
   if (!(v > 0.0)) throw UsageError(option + " must be positive, got " + text);
   return v;
+}
+
+// NAME=VALUE (--set, --image, --topic ...): the name before the first '=',
+// not empty; the value after it.
+inline std::pair<std::string, std::string> parseNameValue(const std::string& option, const std::string& text) {
+  const size_t eq = text.find('=');
+  if (eq == std::string::npos || eq == 0) throw UsageError(option + " expects NAME=VALUE, got '" + text + "'");
+  return {text.substr(0, eq), text.substr(eq + 1)};
 }
 
 // Comma-separated numbers, each in [lo, hi]; at least one, at most max_count.

@@ -889,14 +889,6 @@ int runVchargeCheck(const VchargeOptions& o) {
 // ---------------------------------------------------------------------------
 // The command line: each mode's options, every value checked here (cli.h).
 
-// One --set KEY=VALUE into `sets`.
-void addSet(const std::string& kv, std::vector<std::pair<std::string, std::string>>* sets) {
-  const size_t eq = kv.find('=');
-  if (eq == std::string::npos || eq == 0 || eq + 1 == kv.size())
-    throw cli::UsageError("--set needs KEY=VALUE, got '" + kv + "'");
-  sets->emplace_back(kv.substr(0, eq), kv.substr(eq + 1));
-}
-
 // The keys of `sets` are declared in `table`, else a usage error naming the known ones.
 template <class C>
 void requireKnownSets(const fm::ParamTable<C>& table, const std::vector<std::pair<std::string, std::string>>& sets) {
@@ -932,7 +924,7 @@ SyntheticOptions parseSynthetic(int argc, char** argv) {
     else if (a == "--realistic") o.realistic = true;
     else if (a == "--every-plane") o.every_plane = true;
     else if (a == "--cloudy-sky") o.cloudy_sky = true;
-    else if (a == "--set") addSet(next(), &o.sets);
+    else if (a == "--set") o.sets.push_back(cli::parseNameValue(a, next()));
     else if (a == "--backend") {
       const std::string b = next();
       try {
@@ -965,7 +957,7 @@ VchargeOptions parseVcharge(const std::string& mode, int argc, char** argv) {
     else if (a == "--label") o.label = next();
     else if (a == "--ground-z") o.ground_z = cli::parseDouble(a, next(), -10.0, 10.0);
     else if (!check && a == "--device") o.device = next();
-    else if (!check && a == "--set") addSet(next(), &o.sets);
+    else if (!check && a == "--set") o.sets.push_back(cli::parseNameValue(a, next()));
     else if (check && a == "--depth-k") o.depth_k = next();
     else if (check && a == "--depth-k1") o.depth_k1 = next();
     else if (check && a == "--k") o.k = static_cast<int>(cli::parseInt(a, next(), 0, 1000000));

@@ -73,12 +73,6 @@ const char* kUsage =
     "  frame set on (self_calibration_first_set), and the depth is swept with the corrected rig.\n"
     "  Depth is 32-bit float TIFF: metres of range along each pixel's ray, NaN invalid.\n";
 
-std::pair<std::string, std::string> split(const std::string& kv, const std::string& what) {
-  const size_t eq = kv.find('=');
-  if (eq == std::string::npos || eq == 0) throw fm::cli::UsageError(what + " expects NAME=VALUE, got '" + kv + "'");
-  return {kv.substr(0, eq), kv.substr(eq + 1)};
-}
-
 // The depth stage's configuration of a YAML file (the names of
 // config/depth.yaml) with --set overrides, read by the same core
 // function as the nodelet's.
@@ -134,10 +128,10 @@ int main(int argc, char** argv) {
   const int rc = fm::cli::parseCommandLine("plane_sweep_depth", kUsage, [&] {
     fm::cli::forEachOption(argc, argv, 1, [&](const std::string& k, const fm::cli::NextValue& next) {
       static const std::set<std::string> kSingle = {"--camchain", "--mount", "--out", "--bag", "--reference", "--config"};
-      if (k == "--image") images.push_back(split(next(), k));
-      else if (k == "--mask") masks.push_back(split(next(), k));
-      else if (k == "--topic") topics.push_back(split(next(), k));
-      else if (k == "--set") sets.push_back(split(next(), k));
+      if (k == "--image") images.push_back(fm::cli::parseNameValue(k, next()));
+      else if (k == "--mask") masks.push_back(fm::cli::parseNameValue(k, next()));
+      else if (k == "--topic") topics.push_back(fm::cli::parseNameValue(k, next()));
+      else if (k == "--set") sets.push_back(fm::cli::parseNameValue(k, next()));
       else if (k == "--max-sets") one["max-sets"] = std::to_string(fm::cli::parseInt(k, next(), 1, 100000000));
       else if (k == "--sync-tolerance") sync_tolerance = fm::cli::parseDouble(k, next(), 0.0, 1.0);
       else if (k == "--sync") {

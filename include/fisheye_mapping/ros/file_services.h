@@ -49,6 +49,10 @@ class FilePathServices {
   SaveFolder folder_;
   std::mutex& mutex_;
   std::function<bool()> ready_;
+  // One request under the stage's lock, if the stage started: fn returns the
+  // reply on success; a failure is "<failure>: <error>", logged and counted.
+  bool attempt(std::string* reply, const std::string& failure, const std::function<std::string()>& fn);
+
   Log log_;
   std::atomic<size_t> failures_{0};
   std::vector<ros::ServiceServer> servers_;
