@@ -111,3 +111,33 @@ fm_fetch_tfjs() {
     @tensorflow/tfjs-core@4.22.0 @tensorflow/tfjs-converter@4.22.0 @tensorflow/tfjs-backend-cpu@4.22.0) || return 1
   touch "$FM_TFJS_DIR/installed"
 }
+
+# fm_default_drive DURATION: the default synthetic drive (urban preset, seed 1,
+# DURATION s at 10 Hz, the default rig), made once with make_drive into
+# $FM_CACHE/drives under a key of everything that shapes it, so a change to
+# the generator makes a new one; prints its folder (make_drive's output goes
+# to stderr). Needs the built workspace sourced (fm_source).
+fm_default_drive() {
+  local duration=$1 camchain="$FM_ROOT/config/rig/default_camchain.yaml" mount="$FM_ROOT/config/rig/default_mount.yaml"
+  local key drive
+  key=$(cat "$FM_ROOT/src/core/sim/synthetic_world.cpp" "$FM_ROOT/include/fisheye_mapping/core/sim/synthetic_world.h" \
+            "$FM_ROOT/src/tools/make_drive.cpp" "$camchain" "$mount" | md5sum | cut -c1-10)
+  drive="$FM_CACHE/drives/urban-seed1-${duration}s-$key"
+  mkdir -p "$FM_CACHE/drives"
+  # Two scripts at once: the second waits while the first makes the drive,
+  # then uses it (the drive appears only complete, by a rename).
+  local lock
+  exec {lock}>"$drive.lock"
+  flock "$lock"
+  if [[ ! -f "$drive/drive.bag" ]]; then
+    fm_log "making the default drive (once) in $drive"
+    rm -rf "$drive.partial"
+    rosrun fisheye_mapping make_drive --out "$drive.partial" --camchain "$camchain" --mount "$mount" \
+      --preset urban --seed 1 --duration "$duration" >&2
+    mv "$drive.partial" "$drive"
+  else
+    fm_log "default drive cached in $drive"
+  fi
+  exec {lock}>&-
+  echo "$drive"
+}

@@ -32,56 +32,16 @@
 #include "fisheye_mapping/core/camera/rig.h"
 #include "fisheye_mapping/core/sim/synthetic_world.h"
 #include "ros_test_utils.h"
+#include "small_rig_frames.h"
 
 namespace fm = fisheye_mapping;
 
 namespace {
 
+using fisheye_mapping::test::renderedSet;
+using fisheye_mapping::test::smallRig;
+using fisheye_mapping::test::smallRigInfo;
 using fisheye_mapping::test::waitFor;
-
-fm::Rig smallRig() {
-  const std::string dir = ros::package::getPath("fisheye_mapping") + "/test/data/";
-  return fm::loadKalibrRig(dir + "small_rig_camchain.yaml", dir + "small_rig_mount.yaml");
-}
-
-// A rendered frame set of the small rig (no camera_infos) and cam0's true range.
-fisheye_mapping::CameraFrameSet renderedSet(const fm::Rig& rig, cv::Mat* truth) {
-  fm::synth::WorldConfig wc;
-  wc.seed = 2;
-  wc.route_length = 120;
-  const fm::synth::World world(wc);
-  const double t = 3.0;
-  fisheye_mapping::CameraFrameSet set;
-  set.header.stamp = ros::Time(1700000003, 250000000);
-  set.header.frame_id = rig.cameras[0].frame_id;
-  for (size_t c = 0; c < rig.cameras.size(); ++c) {
-    const auto& cam = rig.cameras[c];
-    auto frame = world.render(cam.model, fm::pixelRays(cam.model), world.egoPose(t) * cam.T_base_cam, t, 100 + c);
-    if (c == 0) *truth = frame.depth;
-    std_msgs::Header h;
-    h.stamp = set.header.stamp;
-    h.frame_id = cam.frame_id;
-    set.camera_names.push_back(cam.name);
-    set.images.push_back(*cv_bridge::CvImage(h, "mono8", frame.image).toImageMsg());
-  }
-  return set;
-}
-
-// The CameraInfo of each small-rig camera, written out from
-// test/data/small_rig_camchain.yaml (all three alike): omni, D = [xi, k1, k2,
-// p1, p2], K from [xi, fx, fy, cx, cy], 256 x 136.
-sensor_msgs::CameraInfo smallRigInfo(const std_msgs::Header& header) {
-  sensor_msgs::CameraInfo info;
-  info.header = header;
-  info.width = 256;
-  info.height = 136;
-  info.distortion_model = "omni";
-  info.D = {0.98, -0.02, 0.004, 0.0002, -0.0001};
-  info.K = {130.0, 0.0, 127.5, 0.0, 130.0, 67.5, 0.0, 0.0, 1.0};
-  info.R = {1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0};
-  info.P = {130.0, 0.0, 127.5, 0.0, 0.0, 130.0, 67.5, 0.0, 0.0, 0.0, 1.0, 0.0};
-  return info;
-}
 
 void setMaxRatio(const std::string& node, double value) {
   dynamic_reconfigure::Reconfigure srv;
@@ -348,10 +308,7 @@ TEST(PlaneSweepDepthNode, CameraInfoChainFromImagesToMap) {
   // The vehicle standing where the images were rendered (synthetic_world's
   // ego pose at t = 3 s), frames 0.1 s apart until the map holds surface
   // points (the sync drops images until its rig is built; min_observations 3).
-  fm::synth::WorldConfig wc;
-  wc.seed = 2;
-  wc.route_length = 120;
-  const Eigen::Isometry3d T_W_B = fm::synth::World(wc).egoPose(3.0);
+  const Eigen::Isometry3d T_W_B = fm::synth::World(fm::test::smallRigWorld()).egoPose(3.0);
   const ros::Time t0 = set.header.stamp + ros::Duration(20.0);
   bool mapped = false;
   for (int k = 0; k < 100 && !mapped; ++k) {

@@ -31,6 +31,7 @@
 #include <vector>
 
 #include "fisheye_mapping/FrameDone.h"
+#include "ros_test_utils.h"
 
 namespace {
 
@@ -137,7 +138,7 @@ const std::string kTwoCameraRig = std::string(FM_TEST_DATA_DIR) + "/two_camera";
 
 // The player's parameters: `bag`, the two image topics (none with
 // `image_topics` false), hold off, short waits; `extra` over them (bool
-// values "true" / "false", anything else a string).
+// values "true" / "false", numbers an int or a double, anything else a string).
 void setPlayerParams(const std::string& name, const std::string& bag, bool image_topics = true,
                      const std::map<std::string, std::string>& extra = {}) {
   ros::param::set("/" + name + "/bag", bag);
@@ -148,6 +149,10 @@ void setPlayerParams(const std::string& name, const std::string& bag, bool image
   for (const auto& [key, value] : extra) {
     if (value == "true" || value == "false") {
       ros::param::set("/" + name + "/" + key, value == "true");
+    } else if (!value.empty() && value.find_first_not_of("-0123456789") == std::string::npos) {
+      ros::param::set("/" + name + "/" + key, std::stoi(value));
+    } else if (!value.empty() && value.find_first_not_of("-0123456789.") == std::string::npos) {
+      ros::param::set("/" + name + "/" + key, std::stod(value));
     } else {
       ros::param::set("/" + name + "/" + key, value);
     }
@@ -190,6 +195,76 @@ TEST(PacedPlayer, EveryFrameSetIsPlayedAfterThePreviousOneIsFinished) {
   EXPECT_NE(yaml.find("played: 6\n"), std::string::npos) << yaml;
   EXPECT_NE(yaml.find("fused: 6\n"), std::string::npos) << yaml;
   EXPECT_NE(yaml.find("timed_out: 0\n"), std::string::npos) << yaml;
+}
+
+// ~loops: the drive played three times as one long drive. Each pass is
+// later by the drive's length + 1 s (0.2 + 1 s here): the images' header
+// stamps, the poses' and the clock keep going forward, the poses repeat the
+// drive's (the vehicle back at its start), and every frame set of every pass
+// is played after the one before is finished.
+TEST(PacedPlayer, LoopsPlayTheDriveAgainLaterInTime) {
+  Pipeline pipeline;
+  ros::NodeHandle nh;
+  std::mutex mu;
+  std::vector<double> tf_stamps, tf_x, clocks;
+  auto tf_sub = nh.subscribe<tf2_msgs::TFMessage>(
+      "/tf", 100, boost::function<void(const tf2_msgs::TFMessage::ConstPtr&)>([&](const tf2_msgs::TFMessage::ConstPtr& m) {
+        std::lock_guard<std::mutex> lock(mu);
+        for (const auto& t : m->transforms) {
+          tf_stamps.push_back(t.header.stamp.toSec());
+          tf_x.push_back(t.transform.translation.x);
+        }
+      }));
+  auto clock_sub = nh.subscribe<rosgraph_msgs::Clock>(
+      "/clock", 100, boost::function<void(const rosgraph_msgs::Clock::ConstPtr&)>([&](const rosgraph_msgs::Clock::ConstPtr& m) {
+        std::lock_guard<std::mutex> lock(mu);
+        clocks.push_back(m->clock.toSec());
+      }));
+  const std::string summary = "/tmp/fisheye_mapping_paced_" + std::to_string(getpid()) + "_loops.yaml";
+  std::string log;
+  const int status = runPlayer("player_loops", writeBag("loops", 3, true, true), &log, summary, true, {{"loops", "3"}});
+  ASSERT_EQ(status, 0) << log;
+  const std::vector<double> expected = {1.0, 1.1, 1.2, 2.2, 2.3, 2.4, 3.4, 3.5, 3.6};
+  {
+    std::lock_guard<std::mutex> lock(pipeline.mutex);
+    ASSERT_EQ(pipeline.seen.size(), expected.size()) << log;
+    for (std::size_t i = 0; i < expected.size(); ++i) EXPECT_NEAR(pipeline.seen[i], expected[i], 1e-6) << "frame set " << i;
+    EXPECT_EQ(pipeline.overlaps, 0);
+  }
+  ASSERT_TRUE(fisheye_mapping::test::waitFor([&] {
+    std::lock_guard<std::mutex> lock(mu);
+    return tf_stamps.size() >= expected.size();
+  }, 5.0));
+  {
+    std::lock_guard<std::mutex> lock(mu);
+    ASSERT_EQ(tf_stamps.size(), expected.size());
+    for (std::size_t i = 0; i < expected.size(); ++i) {
+      EXPECT_NEAR(tf_stamps[i], expected[i], 1e-6) << "pose " << i;
+      EXPECT_DOUBLE_EQ(tf_x[i], 1.0 + 0.1 * double(i % 3)) << "pose " << i << ": the drive's own";
+    }
+    for (std::size_t i = 1; i < clocks.size(); ++i) EXPECT_GE(clocks[i], clocks[i - 1]) << "clock " << i;
+    ASSERT_FALSE(clocks.empty());
+    EXPECT_NEAR(clocks.back(), 3.6, 1e-6);
+  }
+  const std::string yaml = readFile(summary);
+  EXPECT_NE(yaml.find("played: 9\n"), std::string::npos) << yaml;
+  EXPECT_NE(yaml.find("fused: 9\n"), std::string::npos) << yaml;
+  // ~stop_after: 1000 passes cut at 1 s of wall time (0.3 s per frame set
+  // here), at a frame set boundary: every frame set played was finished.
+  const std::string cut = "/tmp/fisheye_mapping_paced_" + std::to_string(getpid()) + "_cut.yaml";
+  ASSERT_EQ(runPlayer("player_cut", writeBag("cut", 3, true, true), &log, cut, true,
+                      {{"loops", "1000"}, {"stop_after", "1.0"}}), 0) << log;
+  const std::string cut_yaml = readFile(cut);
+  EXPECT_NE(cut_yaml.find("stopped_after_s: 1\n"), std::string::npos) << cut_yaml;
+  EXPECT_NE(cut_yaml.find("timed_out: 0\n"), std::string::npos) << cut_yaml;
+  int played = -1, fused = -2;
+  std::sscanf(cut_yaml.c_str(), "played: %d\nfused: %d", &played, &fused);
+  EXPECT_EQ(played, fused) << cut_yaml;
+  EXPECT_GE(played, 3) << cut_yaml;
+  EXPECT_LE(played, 6) << cut_yaml;
+  // A count of passes that is not a positive whole number is refused.
+  EXPECT_EQ(runPlayer("player_loops_bad", writeBag("loops_bad", 2, true, true), &log, "", true, {{"loops", "0"}}), 2) << log;
+  EXPECT_NE(log.find("~loops"), std::string::npos) << log;
 }
 
 TEST(PacedPlayer, BadBagsAreNamedAndStopThePlayer) {

@@ -45,6 +45,9 @@ fm_add_test(test_tsdf_fusion_stage SOURCES test/test_tsdf_fusion_stage.cpp)
 fm_add_test(test_map_accuracy SOURCES test/test_map_accuracy.cpp DEPENDS map_accuracy)
 fm_add_test(test_tsdf_node ROSTEST test/launch/tsdf.test
   SOURCES test/test_tsdf_node.cpp DEPENDS fisheye_mapping_nodelets)
+# Depth and Tsdf loaded in the test's process with a fault hook that throws in their callbacks.
+fm_add_test(test_fault_injection_node ROSTEST test/launch/fault_injection.test
+  SOURCES test/test_fault_injection_node.cpp LIBS fisheye_mapping_ros DEPENDS fisheye_mapping_nodelets)
 # The fusion node's life cycle: SIGTERM saves, a respawn keeps the saved map,
 # lost swap files do not abort. The test starts and signals the nodes itself.
 fm_add_test(test_tsdf_lifecycle_node ROSTEST test/launch/tsdf_lifecycle.test

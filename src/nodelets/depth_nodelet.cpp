@@ -281,6 +281,7 @@ class DepthNodelet : public nodelet::Nodelet {
   // False: dropped for want of a rig (counted there).
   bool process(const CameraFrameSetConstPtr& set) {
     if (!rigFor(*set)) return false;
+    faultPoint("depth frame set");  // tests only: an exception in the sweep (test_fault_injection_node)
     const Rig& rig = stage_->rig();
     const int ref = stage_->reference();
     sensor_msgs::ImageConstPtr ref_img;

@@ -111,7 +111,12 @@ class TsdfNodelet : public nodelet::Nodelet {
     });
     auto every = [&](double period, const char* what, std::function<void()> fn) {  // fn under mutex_
       return nh.createWallTimer(ros::WallDuration(period), [this, what, fn](const ros::WallTimerEvent&) {
-        guarded(timer_errors_, what, [&] { locked(fn); });
+        guarded(timer_errors_, what, [&] {
+          locked([&] {
+            faultPoint(what);  // tests only (test_fault_injection_node)
+            fn();
+          });
+        });
       });
     };
     if (opts_.occupancy_period > 0) {
@@ -267,6 +272,7 @@ class TsdfNodelet : public nodelet::Nodelet {
     std::lock_guard<std::mutex> lock(mutex_);
     const double t0 = StageStats::now();
     TsdfFusionStage::Fused f;
+    faultPoint("tsdf fusion");  // tests only: an exception in the fusion (test_fault_injection_node)
     try {
       f = stage_->fuse(depth, *model, T_W_C, T_W_B, std::int64_t(msg->header.stamp.toNSec()));
     } catch (const std::invalid_argument& e) {

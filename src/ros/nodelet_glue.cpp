@@ -1,5 +1,6 @@
 #include "fisheye_mapping/ros/nodelet_glue.h"
 
+#include <atomic>
 #include <cstdio>
 #include <utility>
 
@@ -59,6 +60,16 @@ void NodeletLogger::throttled(ros::console::Level level, double period_s, const 
     last_[key] = now;
   }
   log(level, text);
+}
+
+namespace {
+std::atomic<FaultHook> fault_hook{nullptr};
+}  // namespace
+
+void setFaultHook(FaultHook hook) { fault_hook.store(hook); }
+
+void faultPoint(const char* site) {
+  if (FaultHook hook = fault_hook.load(std::memory_order_acquire)) hook(site);
 }
 
 void noteCallbackError(StageMonitor& monitor, NodeletLogger& log, const std::string& what, const ros::Time& stamp,

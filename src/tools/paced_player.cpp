@@ -18,6 +18,15 @@
 //   timeout        seconds to wait for one frame set (default 120)
 //   wait_subscribers  seconds to wait for the pipeline to subscribe (default 120)
 //   start          seconds into the bag to begin (default 0)
+//   loops          play the drive this many times in a row (default 1; a
+//                  soak: scripts/checks/soak). Each pass after the first is
+//                  moved later in time by the drive's length + 1 s: every
+//                  stamp (headers, /tf, /clock) keeps going forward, so
+//                  the pipeline sees one long drive in which the vehicle
+//                  jumps back to the start; /tf_static goes out once
+//   stop_after     wall seconds after which the drive ends early: at the next
+//                  frame set, once the pipeline has finished the one before
+//                  (default 0: play every pass to its end)
 //   require_tf     the bag must hold /tf (default true: the map needs poses)
 //   summary_file   YAML with the counts, written at the end (optional)
 //   hold           after the drive, keep running until shut down: the clock
@@ -53,11 +62,14 @@
 #include <sensor_msgs/Image.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <tf2_msgs/TFMessage.h>
+#include <topic_tools/shape_shifter.h>
 
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
 #include <cstdio>
+#include <cstring>
+#include <sstream>
 #include <fstream>
 #include <iostream>
 #include <map>
@@ -98,6 +110,39 @@ bool imageHeader(const rosbag::MessageInstance& m, ImageHeader* out) {
   return false;
 }
 
+// Whether a message type's first field is a std_msgs/Header (its definition's
+// first field line), so that its stamp sits at bytes 4-11 of the message.
+bool startsWithHeader(const std::string& definition) {
+  std::istringstream in(definition);
+  std::string line;
+  while (std::getline(in, line)) {
+    const auto b = line.find_first_not_of(" \t");
+    if (b == std::string::npos || line[b] == '#') continue;
+    return line.compare(b, 7, "Header ") == 0 || line.compare(b, 16, "std_msgs/Header ") == 0;
+  }
+  return false;
+}
+
+// A recorded message (first field a Header) with its header stamp moved by `shift`.
+topic_tools::ShapeShifter shiftedMessage(const rosbag::MessageInstance& m, const ros::Duration& shift) {
+  std::vector<uint8_t> buf(m.size());
+  ros::serialization::OStream out(buf.data(), uint32_t(buf.size()));
+  m.write(out);
+  if (buf.size() >= 12) {
+    uint32_t sec, nsec;
+    std::memcpy(&sec, &buf[4], 4);
+    std::memcpy(&nsec, &buf[8], 4);
+    const ros::Time t = ros::Time(sec, nsec) + shift;
+    std::memcpy(&buf[4], &t.sec, 4);
+    std::memcpy(&buf[8], &t.nsec, 4);
+  }
+  topic_tools::ShapeShifter shifted;
+  shifted.morph(m.getMD5Sum(), m.getDataType(), m.getMessageDefinition(), "");
+  ros::serialization::IStream in(buf.data(), uint32_t(buf.size()));
+  shifted.read(in);
+  return shifted;
+}
+
 // image_transport's CameraInfo topic of an image topic: its namespace +
 // "/camera_info" (/cam0/image_raw -> /cam0/camera_info).
 std::string cameraInfoTopic(const std::string& image_topic) {
@@ -117,6 +162,8 @@ const char* kUsage =
     "  ~timeout           seconds to wait for one frame set (default 120)\n"
     "  ~wait_subscribers  seconds to wait for the pipeline to subscribe (default 120)\n"
     "  ~start             seconds into the bag to begin (default 0)\n"
+    "  ~loops             play the drive this many times, each pass later in time (default 1)\n"
+    "  ~stop_after        end the drive at the next frame set after this many wall seconds (default 0: never)\n"
     "  ~require_tf        the bag must hold /tf (default true)\n"
     "  ~summary_file      YAML with the counts, written at the end (optional)\n"
     "  ~hold              after the drive, keep running: the clock goes on and the last poses\n"
@@ -156,7 +203,8 @@ int main(int argc, char** argv) {
   ros::NodeHandle nh, pnh("~");
   std::string bag_path, camchain, mount, reference_topic, done_topic = "/fusion_done", summary_file;
   std::vector<std::string> image_topics;
-  double timeout = 120.0, wait_subscribers = 120.0, start = 0.0;
+  double timeout = 120.0, wait_subscribers = 120.0, start = 0.0, stop_after = 0.0;
+  int loops = 1;
   bool require_tf = true, hold = true, publish_camera_info = false;
   pnh.getParam("bag", bag_path);
   pnh.getParam("camchain", camchain);
@@ -167,6 +215,8 @@ int main(int argc, char** argv) {
   pnh.getParam("timeout", timeout);
   pnh.getParam("wait_subscribers", wait_subscribers);
   pnh.getParam("start", start);
+  pnh.getParam("loops", loops);
+  pnh.getParam("stop_after", stop_after);
   pnh.getParam("require_tf", require_tf);
   pnh.getParam("summary_file", summary_file);
   pnh.getParam("hold", hold);
@@ -182,7 +232,8 @@ int main(int argc, char** argv) {
     return true;
   };
   if (bad_number("timeout", timeout, 0.001, 86400) || bad_number("wait_subscribers", wait_subscribers, 0, 86400) ||
-      bad_number("start", start, 0, 1e7)) {
+      bad_number("start", start, 0, 1e7) || bad_number("loops", loops, 1, 1e6) ||
+      bad_number("stop_after", stop_after, 0, 1e7)) {
     return 2;
   }
   try {
@@ -410,58 +461,89 @@ int main(int argc, char** argv) {
   std::map<std::string, geometry_msgs::TransformStamped> last_pose;  // child frame -> latest /tf
   ros::Time last_clock, last_tf_stamp;
   const double duration = (view.getEndTime() - begin).toSec();
-  for (const rosbag::MessageInstance& m : play) {
-    if (!ros::ok()) break;
-    const std::string& topic = m.getTopic();
-    const bool is_image = pacer->isImageTopic(topic);
-    ImageHeader image;
-    if (is_image && !imageHeader(m, &image)) {
-      ROS_ERROR("paced_player: %s is not a sensor_msgs/Image or CompressedImage topic; stopping", topic.c_str());
-      bad_input = 1;
-      break;
-    }
-    const double stamp = is_image ? image.header.stamp.toSec() : 0.0;
-    const auto info_it = is_image ? info_out.find(topic) : info_out.end();
-    if (info_it != info_out.end() && image.width >= 0 &&
-        (image.width != info_it->second.width || image.height != info_it->second.height)) {
-      ROS_ERROR("paced_player: ~publish_camera_info: an image on %s is %dx%d, its camera in %s is %dx%d; stopping",
-                topic.c_str(), image.width, image.height, camchain.c_str(), info_it->second.width,
-                info_it->second.height);
-      bad_input = 1;
-      break;
-    }
-    const fm::FramePacer::Step step = pacer->next(topic, stamp);
-    if (step.kind == fm::FramePacer::Step::kStampsBackwards) {
-      ROS_ERROR("paced_player: %s; stopping here (a bag played twice or a clock reset?)", step.error.c_str());
-      bad_input = 1;
-      break;
-    }
-    if (step.kind == fm::FramePacer::Step::kWaitThenPublish) waitFor(step.wait_for);
-    if (topic == reference_topic && (played.empty() || played.back() != stamp)) played.push_back(stamp);
-    rosgraph_msgs::Clock clock;
-    clock.clock = m.getTime();
-    clock_pub.publish(clock);
-    last_clock = clock.clock;
-    if (info_it != info_out.end()) {
-      // The CameraInfo first: a subscriber pairing the two finds it there.
-      sensor_msgs::CameraInfo info = info_it->second.info;
-      info.header.stamp = image.header.stamp;
-      if (!image.header.frame_id.empty()) info.header.frame_id = image.header.frame_id;
-      info_pubs[info_it->second.topic].publish(info);
-    }
-    pubs[topic].publish(m);
-    if (hold && topic == "/tf") {
-      if (auto tf = m.instantiate<tf2_msgs::TFMessage>()) {
+  const ros::Duration pass_length(duration + 1.0);  // ~loops: how much later each pass is played
+  std::map<std::string, bool> has_header;           // topic -> its type's first field is a Header
+  bool stopped_early = false;  // ~stop_after
+  for (int pass = 0; pass < loops && ros::ok() && !bad_input && !stopped_early; ++pass) {
+    const ros::Duration shift = pass_length * double(pass);
+    if (pass > 0) ROS_INFO("paced_player: pass %d of %d, stamps %.1f s later", pass + 1, loops, shift.toSec());
+    for (const rosbag::MessageInstance& m : play) {
+      if (!ros::ok()) break;
+      const std::string& topic = m.getTopic();
+      if (pass > 0 && topic == "/tf_static") continue;  // latched since the first pass
+      const bool is_image = pacer->isImageTopic(topic);
+      ImageHeader image;
+      if (is_image && !imageHeader(m, &image)) {
+        ROS_ERROR("paced_player: %s is not a sensor_msgs/Image or CompressedImage topic; stopping", topic.c_str());
+        bad_input = 1;
+        break;
+      }
+      image.header.stamp += shift;
+      const double stamp = is_image ? image.header.stamp.toSec() : 0.0;
+      const auto info_it = is_image ? info_out.find(topic) : info_out.end();
+      if (info_it != info_out.end() && image.width >= 0 &&
+          (image.width != info_it->second.width || image.height != info_it->second.height)) {
+        ROS_ERROR("paced_player: ~publish_camera_info: an image on %s is %dx%d, its camera in %s is %dx%d; stopping",
+                  topic.c_str(), image.width, image.height, camchain.c_str(), info_it->second.width,
+                  info_it->second.height);
+        bad_input = 1;
+        break;
+      }
+      const fm::FramePacer::Step step = pacer->next(topic, stamp);
+      if (step.kind == fm::FramePacer::Step::kStampsBackwards) {
+        ROS_ERROR("paced_player: %s; stopping here (a bag played twice or a clock reset?)", step.error.c_str());
+        bad_input = 1;
+        break;
+      }
+      if (step.kind == fm::FramePacer::Step::kWaitThenPublish) {
+        waitFor(step.wait_for);
+        const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        if (stop_after > 0 && elapsed > stop_after) {
+          ROS_INFO("paced_player: ~stop_after %.0f s reached after %.0f s: the drive ends here", stop_after, elapsed);
+          stopped_early = true;
+          break;
+        }
+      }
+      if (topic == reference_topic && (played.empty() || played.back() != stamp)) played.push_back(stamp);
+      rosgraph_msgs::Clock clock;
+      clock.clock = m.getTime() + shift;
+      clock_pub.publish(clock);
+      last_clock = clock.clock;
+      if (info_it != info_out.end()) {
+        // The CameraInfo first: a subscriber pairing the two finds it there.
+        sensor_msgs::CameraInfo info = info_it->second.info;
+        info.header.stamp = image.header.stamp;
+        if (!image.header.frame_id.empty()) info.header.frame_id = image.header.frame_id;
+        info_pubs[info_it->second.topic].publish(info);
+      }
+      tf2_msgs::TFMessage::Ptr tf = topic == "/tf" && (hold || pass > 0) ? m.instantiate<tf2_msgs::TFMessage>() : nullptr;
+      if (pass == 0) {
+        pubs[topic].publish(m);
+      } else if (tf) {
+        for (auto& t : tf->transforms) t.header.stamp += shift;
+        pubs[topic].publish(*tf);
+      } else {
+        auto known = has_header.find(topic);
+        if (known == has_header.end()) known = has_header.emplace(topic, startsWithHeader(m.getMessageDefinition())).first;
+        if (known->second) {
+          pubs[topic].publish(shiftedMessage(m, shift));
+        } else {
+          pubs[topic].publish(m);
+        }
+      }
+      if (hold && tf) {
         for (const auto& t : tf->transforms) {
           last_pose[t.child_frame_id] = t;
           last_tf_stamp = std::max(last_tf_stamp, t.header.stamp);
         }
       }
-    }
-    const int progress = static_cast<int>(100.0 * (m.getTime() - begin).toSec() / std::max(duration, 1e-9));
-    if (progress / 10 != last_progress / 10) {
-      last_progress = progress;
-      ROS_INFO("paced_player: %3d %% of the drive, %zu frame sets played", progress, played.size());
+      const int progress = static_cast<int>(100.0 * (pass * duration + (m.getTime() - begin).toSec()) /
+                                            std::max(loops * duration, 1e-9));
+      if (progress / 10 != last_progress / 10) {
+        last_progress = progress;
+        ROS_INFO("paced_player: %3d %% of the drive%s, %zu frame sets played", progress,
+                 loops > 1 ? "s" : "", played.size());
+      }
     }
   }
   if (!played.empty() && ros::ok()) waitFor(played.back());
@@ -488,6 +570,7 @@ int main(int argc, char** argv) {
       fm::cli::writeTextAtomically(summary_file, [&](std::ostream& f) {
         f << "played: " << played.size() << "\nfused: " << fused << "\nskipped: " << skipped
           << "\ntimed_out: " << timed_out << "\nstopped_on_bad_input: " << (bad_input ? "true" : "false")
+          << "\nstopped_after_s: " << (stopped_early ? stop_after : 0.0)
           << "\nwall_s: " << wall << "\n";
       });
     } catch (const std::exception& e) {

@@ -13,7 +13,9 @@
 //                      core StreamTimeline) and the sim clock polled on a wall
 //                      timer: each reset logged and counted on the monitor;
 //   checkedReconfigure a dynamic_reconfigure request checked against the
-//                      stage's declarations, a refused one reported back.
+//                      stage's declarations, a refused one reported back;
+//   faultPoint()       a seam where tests make a callback throw (the throwing
+//                      hook is compiled in tests only: test_fault_injection_node).
 // In a nodelet:
 //   log_ = NodeletLogger(getName());
 //   sub_ = std::make_unique<LazySubscription>(*monitor_, log_, "the frame sets",
@@ -88,6 +90,16 @@ bool guarded(StageMonitor& monitor, NodeletLogger& log, const std::string& what,
 /// The part of guarded() after a catch (also for a callback that catches itself).
 void noteCallbackError(StageMonitor& monitor, NodeletLogger& log, const std::string& what, const ros::Time& stamp,
                        const std::string& why, double throttle_s = 1.0);
+
+/// A test seam. The stages call faultPoint("<stage> <callback>") inside the
+/// callbacks whose exceptions must be caught, counted and survived (the depth
+/// sweep, the TSDF fusion and its timers). Without a hook it does nothing but
+/// read one pointer; a hook installed by a test (setFaultHook, from code
+/// compiled in tests only) may throw there, as a bug or std::bad_alloc
+/// would. Every nodelet loaded in the process sees the same hook.
+using FaultHook = void (*)(const char* site);
+void setFaultHook(FaultHook hook);
+void faultPoint(const char* site);
 
 /// Subscribes the stage's inputs while someone listens to its outputs, as
 /// image_pipeline's nodelets do. update() asks `wanted`, then subscribes or
