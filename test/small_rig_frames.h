@@ -4,10 +4,13 @@
 #define FISHEYE_MAPPING_TEST_SMALL_RIG_FRAMES_H_
 
 #include <string>
+#include <vector>
 
 #include <cv_bridge/cv_bridge.h>
 #include <ros/package.h>
+#include <geometry_msgs/TransformStamped.h>
 #include <sensor_msgs/CameraInfo.h>
+#include <tf2_eigen/tf2_eigen.h>
 
 #include "fisheye_mapping/CameraFrameSet.h"
 #include "fisheye_mapping/core/camera/rig.h"
@@ -50,9 +53,23 @@ inline CameraFrameSet renderedSet(const Rig& rig, cv::Mat* truth) {
   return set;
 }
 
+// The rig's mount as /tf_static carries it: base_link -> each camera's frame.
+inline std::vector<geometry_msgs::TransformStamped> mountTransforms(const Rig& rig, const ros::Time& stamp) {
+  std::vector<geometry_msgs::TransformStamped> mount;
+  for (const auto& cam : rig.cameras) {
+    geometry_msgs::TransformStamped t = tf2::eigenToTransform(cam.T_base_cam);
+    t.header.stamp = stamp;
+    t.header.frame_id = "base_link";
+    t.child_frame_id = cam.frame_id;
+    mount.push_back(t);
+  }
+  return mount;
+}
+
 // The CameraInfo of each small-rig camera, written out from
-// test/data/small_rig_camchain.yaml (all three alike): omni, D = [xi, k1, k2,
-// p1, p2], K from [xi, fx, fy, cx, cy], 256 x 136.
+// test/data/small_rig_camchain.yaml (all three alike, and the same as
+// small_fisheye_camchain.yaml's cam0): omni, D = [xi, k1, k2, p1, p2], K from
+// [xi, fx, fy, cx, cy], 256 x 136.
 inline sensor_msgs::CameraInfo smallRigInfo(const std_msgs::Header& header) {
   sensor_msgs::CameraInfo info;
   info.header = header;

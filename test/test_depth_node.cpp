@@ -208,15 +208,7 @@ TEST(PlaneSweepDepthNode, RigFromCameraInfoGivesTheCamchainDepth) {
 
   // The mount on /tf_static, as robot_state_publisher or the rig tf publisher gives it.
   tf2_ros::StaticTransformBroadcaster static_tf;
-  std::vector<geometry_msgs::TransformStamped> mount;
-  for (const auto& cam : rig.cameras) {
-    geometry_msgs::TransformStamped t = tf2::eigenToTransform(cam.T_base_cam);
-    t.header.stamp = set.header.stamp;
-    t.header.frame_id = "base_link";
-    t.child_frame_id = cam.frame_id;
-    mount.push_back(t);
-  }
-  static_tf.sendTransform(mount);
+  static_tf.sendTransform(fm::test::mountTransforms(rig, set.header.stamp));
   ros::WallDuration(0.5).sleep();
   pub.publish(set);
   ci_pub.publish(ci_set);
@@ -263,21 +255,15 @@ TEST(PlaneSweepDepthNode, CameraInfoChainFromImagesToMap) {
   setMaxRatio("e2e/depth", 0.9);
   tf2_ros::StaticTransformBroadcaster static_tf;
   tf2_ros::TransformBroadcaster tf;
-  std::vector<geometry_msgs::TransformStamped> mount;
   std::vector<ros::Publisher> image_pubs, info_pubs;
   for (size_t c = 0; c < rig.cameras.size(); ++c) {
     const auto& cam = rig.cameras[c];
-    geometry_msgs::TransformStamped t = tf2::eigenToTransform(cam.T_base_cam);
-    t.header.stamp = set.header.stamp;
-    t.header.frame_id = "base_link";
-    t.child_frame_id = cam.frame_id;
-    mount.push_back(t);
     const std::string ns = "/e2e/" + cam.name;
     image_pubs.push_back(nh.advertise<sensor_msgs::Image>(ns + "/image_raw", 5));
     info_pubs.push_back(nh.advertise<sensor_msgs::CameraInfo>(ns + "/camera_info", 1, true));  // latched, as drivers do
     info_pubs.back().publish(smallRigInfo(set.images[c].header));
   }
-  static_tf.sendTransform(mount);
+  static_tf.sendTransform(fm::test::mountTransforms(rig, set.header.stamp));
 
   std::mutex m;
   sensor_msgs::ImageConstPtr depth, e2e_depth;

@@ -96,15 +96,7 @@ TEST(FaultInjection, StagesCountExceptionsInTheirCallbacksAndGoOn) {
 
   tf2_ros::StaticTransformBroadcaster static_tf;
   tf2_ros::TransformBroadcaster tf;
-  std::vector<geometry_msgs::TransformStamped> mount;
-  for (const auto& cam : rig.cameras) {
-    geometry_msgs::TransformStamped t = tf2::eigenToTransform(cam.T_base_cam);
-    t.header.stamp = set.header.stamp;
-    t.header.frame_id = "base_link";
-    t.child_frame_id = cam.frame_id;
-    mount.push_back(t);
-  }
-  static_tf.sendTransform(mount);
+  static_tf.sendTransform(fm::test::mountTransforms(rig, set.header.stamp));
 
   std::mutex m;
   std::set<ros::Time> depth_stamps;

@@ -127,6 +127,27 @@ struct Pipeline {
   }
 };
 
+// The poses of base_link the player publishes (stamp, x) and its clock, as they arrive.
+struct PosesAndClock {
+  ros::NodeHandle nh;
+  std::mutex mu;
+  std::vector<double> tf_stamps, tf_x, clocks;
+  ros::Subscriber tf_sub = nh.subscribe<tf2_msgs::TFMessage>(
+      "/tf", 100, boost::function<void(const tf2_msgs::TFMessage::ConstPtr&)>([this](const tf2_msgs::TFMessage::ConstPtr& m) {
+        std::lock_guard<std::mutex> lock(mu);
+        for (const auto& t : m->transforms) {
+          if (t.child_frame_id != "base_link") continue;
+          tf_stamps.push_back(t.header.stamp.toSec());
+          tf_x.push_back(t.transform.translation.x);
+        }
+      }));
+  ros::Subscriber clock_sub = nh.subscribe<rosgraph_msgs::Clock>(
+      "/clock", 100, boost::function<void(const rosgraph_msgs::Clock::ConstPtr&)>([this](const rosgraph_msgs::Clock::ConstPtr& m) {
+        std::lock_guard<std::mutex> lock(mu);
+        clocks.push_back(m->clock.toSec());
+      }));
+};
+
 std::string readFile(const std::string& path) {
   std::ifstream f(path);
   std::stringstream ss;
@@ -204,22 +225,9 @@ TEST(PacedPlayer, EveryFrameSetIsPlayedAfterThePreviousOneIsFinished) {
 // is played after the one before is finished.
 TEST(PacedPlayer, LoopsPlayTheDriveAgainLaterInTime) {
   Pipeline pipeline;
-  ros::NodeHandle nh;
-  std::mutex mu;
-  std::vector<double> tf_stamps, tf_x, clocks;
-  auto tf_sub = nh.subscribe<tf2_msgs::TFMessage>(
-      "/tf", 100, boost::function<void(const tf2_msgs::TFMessage::ConstPtr&)>([&](const tf2_msgs::TFMessage::ConstPtr& m) {
-        std::lock_guard<std::mutex> lock(mu);
-        for (const auto& t : m->transforms) {
-          tf_stamps.push_back(t.header.stamp.toSec());
-          tf_x.push_back(t.transform.translation.x);
-        }
-      }));
-  auto clock_sub = nh.subscribe<rosgraph_msgs::Clock>(
-      "/clock", 100, boost::function<void(const rosgraph_msgs::Clock::ConstPtr&)>([&](const rosgraph_msgs::Clock::ConstPtr& m) {
-        std::lock_guard<std::mutex> lock(mu);
-        clocks.push_back(m->clock.toSec());
-      }));
+  PosesAndClock seen;
+  std::mutex& mu = seen.mu;
+  std::vector<double>&tf_stamps = seen.tf_stamps, &tf_x = seen.tf_x, &clocks = seen.clocks;
   const std::string summary = "/tmp/fisheye_mapping_paced_" + std::to_string(getpid()) + "_loops.yaml";
   std::string log;
   const int status = runPlayer("player_loops", writeBag("loops", 3, true, true), &log, summary, true, {{"loops", "3"}});
@@ -290,24 +298,9 @@ TEST(PacedPlayer, BadBagsAreNamedAndStopThePlayer) {
 // later stamp and the clock at that stamp; tf2 never sees a stamp twice.
 TEST(PacedPlayer, HoldAdvancesTheClockAndNeverRepeatsAPoseStamp) {
   Pipeline pipeline;
-  ros::NodeHandle nh;
-  std::mutex mu;
-  std::vector<double> tf_stamps, tf_x;  // base_link, in arrival order
-  std::vector<double> clocks;
-  auto tf_sub = nh.subscribe<tf2_msgs::TFMessage>(
-      "/tf", 100, boost::function<void(const tf2_msgs::TFMessage::ConstPtr&)>([&](const tf2_msgs::TFMessage::ConstPtr& m) {
-        std::lock_guard<std::mutex> lock(mu);
-        for (const auto& t : m->transforms) {
-          if (t.child_frame_id != "base_link") continue;
-          tf_stamps.push_back(t.header.stamp.toSec());
-          tf_x.push_back(t.transform.translation.x);
-        }
-      }));
-  auto clock_sub = nh.subscribe<rosgraph_msgs::Clock>(
-      "/clock", 100, boost::function<void(const rosgraph_msgs::Clock::ConstPtr&)>([&](const rosgraph_msgs::Clock::ConstPtr& m) {
-        std::lock_guard<std::mutex> lock(mu);
-        clocks.push_back(m->clock.toSec());
-      }));
+  PosesAndClock seen;
+  std::mutex& mu = seen.mu;
+  std::vector<double>&tf_stamps = seen.tf_stamps, &tf_x = seen.tf_x, &clocks = seen.clocks;
   const std::string name = "player_hold";
   setPlayerParams(name, writeBag("hold", 4, true, true), true, {{"hold", "true"}});
   const std::string out = logPath(name);

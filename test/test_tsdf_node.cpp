@@ -41,6 +41,7 @@
 #include "fisheye_mapping/core/sim/analytic_scene.h"
 #include "fisheye_mapping/core/camera/rig.h"
 #include "ros_test_utils.h"
+#include "small_rig_frames.h"
 
 namespace fm = fisheye_mapping;
 
@@ -216,19 +217,9 @@ class TsdfFusionNode : public ::testing::Test {
     }
   }
 
-  // small_fisheye_camchain.yaml's cam0 written out as a CameraInfo: omni,
-  // D = [xi, k1, k2, p1, p2], K from [xi, fx, fy, cx, cy], 256 x 136.
+  // small_fisheye_camchain.yaml's cam0 written out as a CameraInfo (the small rig's cameras').
   static sensor_msgs::CameraInfo cameraInfo(const std_msgs::Header& header) {
-    sensor_msgs::CameraInfo info;
-    info.header = header;
-    info.width = 256;
-    info.height = 136;
-    info.distortion_model = "omni";
-    info.D = {0.98, -0.02, 0.004, 0.0002, -0.0001};
-    info.K = {130.0, 0.0, 127.5, 0.0, 130.0, 67.5, 0.0, 0.0, 1.0};
-    info.R = {1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0};
-    info.P = {130.0, 0.0, 127.5, 0.0, 0.0, 130.0, 67.5, 0.0, 0.0, 0.0, 1.0, 0.0};
-    return info;
+    return fisheye_mapping::test::smallRigInfo(header);
   }
 
   ros::NodeHandle nh_;
