@@ -2,7 +2,7 @@
 """Samples a running vehicle.launch once a period for scripts/checks/soak.
 
 usage: soak_sampler.py --csv SAMPLES.csv [--period S] [--until-file F] [--timeout S]
-                       [--process NAME ...]
+                       [--process NAME ...] [--viewer TOPIC ...]
 
 Each --period seconds of wall time (default 60) it writes one row to --csv:
 the resident memory (VmRSS, MB) of each --process (a ROS node name such as
@@ -11,8 +11,12 @@ when it has exited, and its pid, so that a respawn shows), and, from
 /diagnostics, per stage (the status name's last part: sync, depth, detector,
 depth_mask, tsdf) its inputs, outputs, the total of its dropped counts and
 its backlog (inputs - outputs - dropped: what it holds in its queues or
-mailbox; not for the sync, whose inputs are images and outputs frame sets), plus the TSDF map's blocks in memory. It stops with a last row as
-soon as the file --until-file exists (the paced player's summary), or after
+mailbox; not for the sync, whose inputs are images and outputs frame sets),
+plus the TSDF map's blocks in memory and its mesh's triangles. Meanwhile it
+subscribes to each --viewer topic (default: the mesh, the cloud and the
+masked depth, as rviz does; nothing is deserialized), so that the stages
+build all they build for a user watching. It stops with a last row as soon
+as the file --until-file exists (the paced player's summary), or after
 --timeout seconds. Exit status 1 when no diagnostics arrived.
 """
 import argparse
@@ -25,6 +29,7 @@ import time
 
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray
+from rospy.msg import AnyMsg
 
 STAGES = ["sync", "depth", "detector", "depth_mask", "tsdf"]
 
@@ -72,6 +77,8 @@ def main():
     ap.add_argument("--period", type=float, default=60.0)
     ap.add_argument("--until-file", default="")
     ap.add_argument("--timeout", type=float, default=86400.0)
+    ap.add_argument("--viewer", nargs="*", default=["/fisheye_mapping/tsdf/mesh", "/fisheye_mapping/tsdf/cloud",
+                                                    "/fisheye_mapping/depth_masked/image"])
     ap.add_argument("--process", nargs="*", default=["depth_manager", "detection_manager", "fusion_manager", "player"])
     args = ap.parse_args(rospy.myargv()[1:])
     rospy.init_node("soak_sampler", anonymous=True, disable_signals=True)
@@ -86,12 +93,15 @@ def main():
                     stages[stage] = {kv.key: kv.value for kv in st.values}
 
     rospy.Subscriber("/diagnostics", DiagnosticArray, on_diagnostics, queue_size=50)
+    # A viewer's subscriptions (rviz's: the mesh, the cloud, the depth image),
+    # so that the stages do all they do for a user watching the map.
+    viewer = [rospy.Subscriber(t, AnyMsg, lambda _: None, queue_size=2) for t in args.viewer]
     header = ["minute", "wall_s"]
     for p in args.process:
         header += [f"{p}_pid", f"{p}_rss_mb"]
     for s in STAGES:
         header += [f"{s}_inputs", f"{s}_outputs", f"{s}_dropped", f"{s}_backlog"]
-    header += ["tsdf_blocks"]
+    header += ["tsdf_blocks", "tsdf_mesh_triangles"]
     start = time.time()
     rows = 0
     with open(args.csv, "w", newline="") as f:
@@ -122,7 +132,7 @@ def main():
                 backlog = inputs - outputs - dropped if same_unit else ""
                 row += ["" if inputs is None else inputs, "" if outputs is None else outputs,
                         dropped if v else "", backlog]
-            row += [snapshot.get("tsdf", {}).get("blocks", "")]
+            row += [snapshot.get("tsdf", {}).get("blocks", ""), snapshot.get("tsdf", {}).get("mesh triangles", "")]
             out.writerow(row)
             f.flush()
             rows += 1

@@ -15,7 +15,9 @@ TsdfTopics::TsdfTopics(ros::NodeHandle& nh, const std::string& world_frame, Mesh
                        std::function<void(const ros::SingleSubscriberPublisher&)> on_mesh_connect)
     : frame_(world_frame), markers_(world_frame, colour) {
   mesh_ = nh.advertise<visualization_msgs::MarkerArray>("tsdf/mesh", 16, std::move(on_mesh_connect));
-  cloud_ = nh.advertise<sensor_msgs::PointCloud2>("tsdf/cloud", 2, true);
+  cloud_ = nh.advertise<sensor_msgs::PointCloud2>(
+      "tsdf/cloud", 2, [this](const ros::SingleSubscriberPublisher&) { cloud_subscriber_came_ = true; },
+      ros::SubscriberStatusCallback(), ros::VoidConstPtr(), true);
   occupancy_ = nh.advertise<nav_msgs::OccupancyGrid>("tsdf/occupancy", 1, true);
   done_ = nh.advertise<fisheye_mapping::FrameDone>("tsdf/fusion_done", 100);
 }
@@ -25,10 +27,18 @@ ros::Time TsdfTopics::stamp(const TsdfFusionStage& stage) const {
 }
 
 void TsdfTopics::publish(TsdfFusionStage& stage) {
+  const bool mesh_wanted = mesh_.getNumSubscribers() > 0, cloud_wanted = cloud_.getNumSubscribers() > 0;
+  if (!mesh_wanted && !cloud_wanted) return;  // a subscriber that comes gets everything (sendAll, cloud_subscriber_came_)
   const std::vector<BlockIndex> changed = stage.updateMesh();
-  const visualization_msgs::MarkerArray markers = markers_.update(stage.mesher().blocks(), changed, stamp(stage));
-  if (!markers.markers.empty()) mesh_.publish(markers);
-  if (!stage.takeCloudStale() && changed.empty()) return;
+  if (mesh_wanted) {
+    const visualization_msgs::MarkerArray markers = markers_.update(stage.mesher().blocks(), changed, stamp(stage));
+    if (!markers.markers.empty()) mesh_.publish(markers);
+  } else {
+    markers_.markChanged(changed);  // sent with the next update to a mesh subscriber
+  }
+  if (!cloud_wanted) return;
+  const bool new_subscriber = cloud_subscriber_came_.exchange(false);
+  if (!stage.takeCloudStale() && changed.empty() && !new_subscriber) return;
   cloud_.publish(toCloudMsg(stage.mesher().surfaceCloud(), frame_, stamp(stage)));
 }
 

@@ -4,7 +4,10 @@
 //                   changed; a subscriber that connects later first gets the
 //                   whole mesh; one DELETEALL after a clear, load or reset;
 //   tsdf/cloud      PointCloud2 (latched) of the surface, when blocks changed
-//                   or after a reset;
+//                   or after a reset, and for a subscriber that connects;
+// The mesh and the cloud are built only while someone subscribes to one of
+// them: a map nobody looks at costs no meshing, no cloud and no serialising
+// each period (the store keeps the changed blocks for later).
 //   tsdf/occupancy  OccupancyGrid (latched) around the vehicle's last fused
 //                   pose, while someone subscribes;
 //   tsdf/fusion_done  FrameDone for each depth frame, fused or skipped.
@@ -12,6 +15,8 @@
 // and frameDone().
 #ifndef FISHEYE_MAPPING_ROS_TSDF_TOPICS_H_
 #define FISHEYE_MAPPING_ROS_TSDF_TOPICS_H_
+
+#include <atomic>
 
 #include <functional>
 #include <string>
@@ -33,7 +38,8 @@ class TsdfTopics {
   TsdfTopics(ros::NodeHandle& nh, const std::string& world_frame, MeshColoring colour,
              std::function<void(const ros::SingleSubscriberPublisher&)> on_mesh_connect);
 
-  // Every publish period: the mesh blocks that changed, and the cloud.
+  // Every publish period, while someone subscribes: the mesh blocks that
+  // changed, and the cloud.
   void publish(TsdfFusionStage& stage);
   // After a clear, load or reset of the stage's map: rviz gets a DELETEALL.
   void publishReset(TsdfFusionStage& stage);
@@ -54,6 +60,7 @@ class TsdfTopics {
   std::string frame_;
   MeshMarkerStream markers_;
   ros::Publisher mesh_, cloud_, occupancy_, done_;
+  std::atomic<bool> cloud_subscriber_came_{false};  // a new tsdf/cloud subscriber waits for its first cloud
 };
 
 }  // namespace fisheye_mapping

@@ -182,6 +182,14 @@ std::vector<std::pair<std::string, std::string>> TsdfFusionStage::report(std::ve
                                                         std::to_string(occupancy_cells_[1]) + " / " +
                                                         std::to_string(occupancy_cells_[2])},
   };
+  // The mesh as last built (built while someone looks at it, or for an export).
+  size_t triangles = 0, points = 0;
+  for (const auto& kv : mesher_.blocks()) {
+    triangles += kv.second.triangles.size() / 3;
+    points += kv.second.surface_points.size();
+  }
+  r.emplace_back("mesh triangles", std::to_string(triangles));
+  r.emplace_back("surface points", std::to_string(points));
   if (const std::string e = session_.lastError(); !e.empty()) r.emplace_back("last save error", e);
   return r;
 }
