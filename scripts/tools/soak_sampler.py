@@ -6,8 +6,11 @@ usage: soak_sampler.py --csv SAMPLES.csv [--period S] [--until-file F] [--timeou
 
 Each --period seconds of wall time (default 60) it writes one row to --csv:
 the resident memory (VmRSS, MB) of each --process (a ROS node name such as
-depth_manager, found by its __name:= argument in /proc/*/cmdline; "gone"
-when it has exited, and its pid, so that a respawn shows), and, from
+depth_manager, found by its __name:= argument in /proc/*/cmdline), read every
+--rss-every seconds (default 5): the median and the maximum of the period's
+readings (a map's cloud and mesh messages come and go each publish period;
+the median is what stays), with its pid ("gone" when it exited, two pids
+when it was respawned within the period), and, from
 /diagnostics, per stage (the status name's last part: sync, depth, detector,
 depth_mask, tsdf) its inputs, outputs, the total of its dropped counts and
 its backlog (inputs - outputs - dropped: what it holds in its queues or
@@ -75,6 +78,7 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--csv", required=True)
     ap.add_argument("--period", type=float, default=60.0)
+    ap.add_argument("--rss-every", type=float, default=5.0)
     ap.add_argument("--until-file", default="")
     ap.add_argument("--timeout", type=float, default=86400.0)
     ap.add_argument("--viewer", nargs="*", default=["/fisheye_mapping/tsdf/mesh", "/fisheye_mapping/tsdf/cloud",
@@ -98,7 +102,7 @@ def main():
     viewer = [rospy.Subscriber(t, AnyMsg, lambda _: None, queue_size=2) for t in args.viewer]
     header = ["minute", "wall_s"]
     for p in args.process:
-        header += [f"{p}_pid", f"{p}_rss_mb"]
+        header += [f"{p}_pid", f"{p}_rss_mb", f"{p}_rss_max_mb"]
     for s in STAGES:
         header += [f"{s}_inputs", f"{s}_outputs", f"{s}_dropped", f"{s}_backlog"]
     header += ["tsdf_blocks", "tsdf_mesh_triangles"]
@@ -109,18 +113,30 @@ def main():
         out.writerow(header)
         f.flush()
         next_sample = start + args.period
+        next_rss = start
+        rss_seen = {p: [] for p in args.process}  # this period's readings: (pid, MB or None)
         while True:
             done = bool(args.until_file) and os.path.exists(args.until_file)
             now = time.time()
+            if now >= next_rss:  # memory every --rss-every s: a row has its median and maximum
+                next_rss += args.rss_every
+                for p in args.process:
+                    pid = find_pid(p)
+                    rss_seen[p].append((pid, rss_mb(pid) if pid else None))
             if not done and now < next_sample and now - start < args.timeout:
                 time.sleep(0.5)
                 continue
             next_sample += args.period
             row = [f"{(now - start) / 60.0:.2f}", f"{now - start:.0f}"]
             for p in args.process:
-                pid = find_pid(p)
-                rss = rss_mb(pid) if pid else None
-                row += [pid or "gone", f"{rss:.1f}" if rss is not None else "gone"]
+                seen, rss_seen[p] = rss_seen[p], []
+                pids = {pid for pid, _ in seen}
+                values = sorted(v for _, v in seen if v is not None)
+                if not values or None in pids or len(pids) > 1:  # exited or respawned within the period
+                    row += ["gone" if None in pids or not values else "+".join(str(x) for x in sorted(pids)),
+                            "gone", "gone"]
+                else:
+                    row += [pids.pop(), f"{values[len(values) // 2]:.1f}", f"{values[-1]:.1f}"]
             with lock:
                 snapshot = {k: dict(v) for k, v in stages.items()}
             for s in STAGES:
@@ -137,7 +153,7 @@ def main():
             f.flush()
             rows += 1
             print(f"[{row[0]} min] " + ", ".join(
-                f"{p} {row[2 + 2 * i + 1]} MB" for i, p in enumerate(args.process)), flush=True)
+                f"{p} {row[2 + 3 * i + 1]} MB" for i, p in enumerate(args.process)), flush=True)
             if done or now - start >= args.timeout:
                 break
     return 0 if stages else 1
