@@ -14,7 +14,8 @@ when it was respawned within the period), and, from
 /diagnostics, per stage (the status name's last part: sync, depth, detector,
 depth_mask, tsdf) its inputs, outputs, the total of its dropped counts and
 its backlog (inputs - outputs - dropped: what it holds in its queues or
-mailbox; not for the sync, whose inputs are images and outputs frame sets),
+mailbox; only for depth, detector and tsdf: the sync takes images and gives
+frame sets, the mask's drops count detection sets too),
 plus the TSDF map's blocks in memory and its mesh's triangles. Meanwhile it
 subscribes to each --viewer topic (default: the mesh, the cloud and the
 masked depth, as rviz does; nothing is deserialized), so that the stages
@@ -115,24 +116,33 @@ def main():
         next_sample = start + args.period
         next_rss = start
         rss_seen = {p: [] for p in args.process}  # this period's readings: (pid, MB or None)
+        started = set()  # processes seen running: before that, no reading is "gone"
         while True:
             done = bool(args.until_file) and os.path.exists(args.until_file)
             now = time.time()
-            if now >= next_rss:  # memory every --rss-every s: a row has its median and maximum
+            if now >= next_rss and not done:  # memory every --rss-every s: a row has its median and maximum
                 next_rss += args.rss_every
                 for p in args.process:
                     pid = find_pid(p)
-                    rss_seen[p].append((pid, rss_mb(pid) if pid else None))
+                    rss = rss_mb(pid) if pid else None
+                    if rss is not None:
+                        started.add(p)
+                    if rss is not None or p in started:
+                        rss_seen[p].append((pid if rss is not None else None, rss))
             if not done and now < next_sample and now - start < args.timeout:
                 time.sleep(0.5)
                 continue
             next_sample += args.period
+            if done and not any(rss_seen.values()):
+                break  # the drive ended with the last row (the launch goes down after it)
             row = [f"{(now - start) / 60.0:.2f}", f"{now - start:.0f}"]
             for p in args.process:
                 seen, rss_seen[p] = rss_seen[p], []
                 pids = {pid for pid, _ in seen}
                 values = sorted(v for _, v in seen if v is not None)
-                if not values or None in pids or len(pids) > 1:  # exited or respawned within the period
+                if not seen:  # not started yet
+                    row += ["", "", ""]
+                elif not values or None in pids or len(pids) > 1:  # exited or respawned within the period
                     row += ["gone" if None in pids or not values else "+".join(str(x) for x in sorted(pids)),
                             "gone", "gone"]
                 else:
@@ -143,8 +153,9 @@ def main():
                 v = snapshot.get(s, {})
                 inputs, outputs = total(v.get("inputs", "")), total(v.get("outputs", ""))
                 dropped = sum(total(val) or 0 for key, val in v.items() if key.startswith("dropped: "))
-                # The sync's inputs are images and its outputs frame sets: no backlog in one unit.
-                same_unit = s != "sync" and inputs is not None and outputs is not None
+                # Not for the sync (images in, frame sets out) nor the mask (its drops count
+                # detection sets too, and depth passed unmasked is an output as well).
+                same_unit = s in ("depth", "detector", "tsdf") and inputs is not None and outputs is not None
                 backlog = inputs - outputs - dropped if same_unit else ""
                 row += ["" if inputs is None else inputs, "" if outputs is None else outputs,
                         dropped if v else "", backlog]
