@@ -141,6 +141,31 @@ TEST(TsdfFusionStage, TheGreyImageOfTheStampColoursTheWall) {
   EXPECT_EQ(s.map().grey(v), 200);
 }
 
+// The map's own memory on the report: its blocks (4608 bytes each: 512 voxels
+// of 8 bytes and 512 grey bytes) and its mesh's vertices, once meshed.
+TEST(TsdfFusionStage, TheReportCountsTheMapsOwnMemory) {
+  Wall wall;
+  TsdfFusionStage s(smallMap(), TsdfStageOptions(), quiet());
+  for (int i = 0; i < 3; ++i) wall.fuse(s, i, (10 + i) * kS);
+  auto value = [&s](const std::string& key) {
+    std::vector<std::string> warnings;
+    for (const auto& [k, v] : s.report(&warnings))
+      if (k == key) return v;
+    return std::string("missing");
+  };
+  ASSERT_EQ(sizeof(VoxelBlock), 4608u);
+  const size_t blocks = s.map().numBlocks();
+  ASSERT_GT(blocks, 100u);
+  EXPECT_NEAR(std::stod(value("voxel memory (MB)")), blocks * 4608.0 / 1048576.0, 0.051);
+  EXPECT_EQ(value("mesh triangles"), "0");  // not meshed yet
+  EXPECT_EQ(value("mesh memory (MB)"), "0");
+  s.updateMesh();
+  const double triangles = std::stod(value("mesh triangles"));
+  ASSERT_GT(triangles, 1000);
+  // At least 3 vertices of 12 bytes and 3 grey bytes per triangle.
+  EXPECT_GE(std::stod(value("mesh memory (MB)")), triangles * 39.0 / 1048576.0 - 0.051);
+}
+
 TEST(TsdfFusionStage, TheObstacleGridLiesAroundTheLastVehiclePose) {
   Wall wall;
   TsdfStageOptions opts;

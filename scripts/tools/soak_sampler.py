@@ -16,10 +16,12 @@ depth_mask, tsdf) its inputs, outputs, the total of its dropped counts and
 its backlog (inputs - outputs - dropped: what it holds in its queues or
 mailbox; only for depth, detector and tsdf: the sync takes images and gives
 frame sets, the mask's drops count detection sets too),
-plus the TSDF map's blocks in memory and its mesh's triangles. Meanwhile it
-subscribes to each --viewer topic (default: the mesh, the cloud and the
-masked depth, as rviz does; nothing is deserialized), so that the stages
-build all they build for a user watching. It stops with a last row as soon
+plus the TSDF map's blocks in memory, its mesh's triangles and the memory
+the map itself holds (voxels, mesh). Meanwhile it
+subscribes to each --viewer topic (none by default; scripts/checks/soak
+--viewer gives the mesh, the cloud and the masked depth, as rviz takes
+them; nothing is deserialized), so that the stages build all they build for
+a user watching. It stops with a last row as soon
 as the file --until-file exists (the paced player's summary), or after
 --timeout seconds. Exit status 1 when no diagnostics arrived.
 """
@@ -82,8 +84,7 @@ def main():
     ap.add_argument("--rss-every", type=float, default=5.0)
     ap.add_argument("--until-file", default="")
     ap.add_argument("--timeout", type=float, default=86400.0)
-    ap.add_argument("--viewer", nargs="*", default=["/fisheye_mapping/tsdf/mesh", "/fisheye_mapping/tsdf/cloud",
-                                                    "/fisheye_mapping/depth_masked/image"])
+    ap.add_argument("--viewer", nargs="*", default=[])
     ap.add_argument("--process", nargs="*", default=["depth_manager", "detection_manager", "fusion_manager", "player"])
     args = ap.parse_args(rospy.myargv()[1:])
     rospy.init_node("soak_sampler", anonymous=True, disable_signals=True)
@@ -106,7 +107,7 @@ def main():
         header += [f"{p}_pid", f"{p}_rss_mb", f"{p}_rss_max_mb"]
     for s in STAGES:
         header += [f"{s}_inputs", f"{s}_outputs", f"{s}_dropped", f"{s}_backlog"]
-    header += ["tsdf_blocks", "tsdf_mesh_triangles"]
+    header += ["tsdf_blocks", "tsdf_mesh_triangles", "tsdf_voxel_mb", "tsdf_mesh_mb"]
     start = time.time()
     rows = 0
     with open(args.csv, "w", newline="") as f:
@@ -159,7 +160,8 @@ def main():
                 backlog = inputs - outputs - dropped if same_unit else ""
                 row += ["" if inputs is None else inputs, "" if outputs is None else outputs,
                         dropped if v else "", backlog]
-            row += [snapshot.get("tsdf", {}).get("blocks", ""), snapshot.get("tsdf", {}).get("mesh triangles", "")]
+            tsdf = snapshot.get("tsdf", {})
+            row += [tsdf.get(k, "") for k in ["blocks", "mesh triangles", "voxel memory (MB)", "mesh memory (MB)"]]
             out.writerow(row)
             f.flush()
             rows += 1

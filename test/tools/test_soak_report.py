@@ -23,14 +23,32 @@ class SoakVerdict(unittest.TestCase):
         self.assertEqual(failures, [])
         # 400 -> 439 MB: +9.75 %; the highest reading of the run, 500 MB.
         self.assertEqual(len(table), 1)
-        name, base, end, growth, peak = table[0]
-        self.assertEqual((name, base, end, peak), ("m", 400.0, 439.0, 500.0))
+        name, what, base, end, growth, peak = table[0]
+        self.assertEqual((name, what, base, end, peak), ("m", "RSS", 400.0, 439.0, 500.0))
         self.assertAlmostEqual(growth, 9.75)
 
     def test_growth_beyond_the_limit_fails_naming_the_process(self):
         rows = [row(2, "5", "400.0", "400.0"), row(3, "5", "441.0", "441.0")]
         failures, _ = soak_report.verdict(rows, GOOD_PLAYER, warmup=2, max_growth=10)
-        self.assertEqual(failures, ["m grew by 10.2 % (400.0 -> 441.0 MB) after minute 2"])
+        self.assertEqual(failures, ["m grew by 10.2 % (RSS: 400.0 -> 441.0 MB) after minute 2"])
+
+    def test_the_maps_process_is_judged_beyond_the_map(self):
+        # The map grows from 250 to 330 MB (voxels 200 -> 220, mesh 50 -> 110):
+        # the process's RSS 600 -> 690 MB (+15 %), what lies beyond the map
+        # 350 -> 360 MB (+2.9 %): a growing map, not a leak.
+        rows = [dict(row(2, "5", "600.0", "650.0"), tsdf_voxel_mb="200", tsdf_mesh_mb="50"),
+                dict(row(3, "5", "690.0", "720.0"), tsdf_voxel_mb="220", tsdf_mesh_mb="110")]
+        failures, table = soak_report.verdict(rows, GOOD_PLAYER, warmup=2, max_growth=10, map_process="m")
+        self.assertEqual(failures, [])
+        self.assertEqual([t[:2] for t in table], [("m", "RSS"), ("TSDF map", "voxels + mesh"), ("m", "RSS beyond the map")])
+        self.assertAlmostEqual(table[0][4], 15.0)
+        self.assertAlmostEqual(table[1][4], 32.0)
+        self.assertEqual(table[2][2:4], (350.0, 360.0))
+        self.assertAlmostEqual(table[2][4], 100.0 * 10 / 350)
+        # 60 MB more RSS: 420 MB beyond the map (+20 %) fails, naming what was judged.
+        rows[1]["m_rss_mb"] = "750.0"
+        failures, _ = soak_report.verdict(rows, GOOD_PLAYER, warmup=2, max_growth=10, map_process="m")
+        self.assertEqual(failures, ["m grew by 20.0 % (RSS beyond the map: 350.0 -> 420.0 MB) after minute 2"])
 
     def test_a_respawn_or_an_exit_fails(self):
         respawned = [row(2, "5", "400.0", "400.0"), row(3, "6", "300.0", "300.0")]

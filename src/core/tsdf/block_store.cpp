@@ -231,6 +231,12 @@ const VoxelBlock* BlockStore::fetch(const BlockIndex& index) {
   return read_cache_.emplace(index, std::move(block)).first->second.get();
 }
 
+size_t BlockStore::memoryBytes() const {
+  size_t in_ram = active_.size() + read_cache_.size();
+  for (const auto& kv : swapped_) in_ram += kv.second != nullptr;
+  return in_ram * sizeof(VoxelBlock);
+}
+
 std::vector<BlockIndex> BlockStore::allBlocks() const {
   std::vector<BlockIndex> out;
   out.reserve(numBlocks());

@@ -183,13 +183,20 @@ std::vector<std::pair<std::string, std::string>> TsdfFusionStage::report(std::ve
                                                         std::to_string(occupancy_cells_[2])},
   };
   // The mesh as last built (built while someone looks at it, or for an export).
-  size_t triangles = 0, points = 0;
+  size_t triangles = 0, points = 0, mesh_bytes = 0;
   for (const auto& kv : mesher_.blocks()) {
-    triangles += kv.second.triangles.size() / 3;
-    points += kv.second.surface_points.size();
+    const BlockOutput& o = kv.second;
+    triangles += o.triangles.size() / 3;
+    points += o.surface_points.size();
+    mesh_bytes += o.triangles.capacity() * sizeof(Eigen::Vector3f) + o.triangle_grey.capacity() +
+                  o.surface_points.capacity() * sizeof(Eigen::Vector3f) + o.surface_grey.capacity();
   }
   r.emplace_back("mesh triangles", std::to_string(triangles));
   r.emplace_back("surface points", std::to_string(points));
+  // What the map itself holds: its voxel blocks in RAM and the mesh's vertices
+  // (scripts/checks/soak tells a growing map from a leak with them).
+  r.emplace_back("voxel memory (MB)", num(std::round(map_.memoryBytes() / 1048576.0 * 10) / 10));
+  r.emplace_back("mesh memory (MB)", num(std::round(mesh_bytes / 1048576.0 * 10) / 10));
   if (const std::string e = session_.lastError(); !e.empty()) r.emplace_back("last save error", e);
   return r;
 }

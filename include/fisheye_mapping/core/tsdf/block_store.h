@@ -119,6 +119,9 @@ class BlockStore {
   size_t numBlocks() const { return active_.size() + swapped_.size(); }
   // Memory held by active blocks (the bounded part), bytes.
   size_t activeMemoryBytes() const { return active_.size() * sizeof(VoxelBlock); }
+  // Memory held by every block in RAM: active, swapped to host memory, and
+  // read back from swap files (read cache), bytes.
+  size_t memoryBytes() const;
   // Active blocks first, then swapped ones (hash order within each).
   std::vector<BlockIndex> allBlocks() const;
 

@@ -114,6 +114,7 @@ class TsdfMap {
   void dropSwapCache() { store_->dropReadCache(); }
 
   size_t numActiveBlocks() const { return store_->numActiveBlocks(); }
+  size_t memoryBytes() const { return store_->memoryBytes(); }
   size_t numSwappedBlocks() const { return store_->numSwappedBlocks(); }
   size_t numBlocks() const { return store_->numBlocks(); }
   // Memory held by active blocks (the bounded part), bytes.
