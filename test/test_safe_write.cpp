@@ -226,31 +226,6 @@ TEST_F(SafeWrite, WriteAtPatchesBytesAlreadyWritten) {
   EXPECT_THROW(w.write("x", 1), std::runtime_error);
 }
 
-// A library that writes only by name (make_drive's rosbag): it rewrites the
-// temporary file by name; adopted and committed, the target holds exactly
-// its bytes and replaces the old file; not committed, the old file stays and
-// no temporary is left.
-TEST_F(SafeWrite, AFileWrittenByNameIsAdoptedAndCommitted) {
-  const std::string p = outside_ + "/drive.bag";
-  writeFileSafely(p, "old");
-  {
-    SafeFileWriter w(p);
-    std::ofstream(w.tempPath(), std::ios::binary | std::ios::trunc) << "written by name";
-    w.adoptWrittenFile();
-    EXPECT_EQ(w.size(), 15u);
-    EXPECT_EQ(readBytes(p), "old") << "nothing replaced before commit";
-    w.commit();
-  }
-  EXPECT_EQ(readBytes(p), "written by name");
-  {
-    SafeFileWriter w(p);
-    std::ofstream(w.tempPath(), std::ios::binary | std::ios::trunc) << "abandoned";
-    w.adoptWrittenFile();
-  }
-  EXPECT_EQ(readBytes(p), "written by name");
-  EXPECT_EQ(listing(outside_), "drive.bag ");
-}
-
 TEST(CaptureFileOutput, ReturnsWhatTheWriterWroteByName) {
   const std::string bytes = captureFileOutput([](const std::string& name) {
     std::ofstream f(name, std::ios::binary);

@@ -392,14 +392,10 @@ int main(int argc, char** argv) {
       fm::cli::writeTextAtomically(opt.out + "/world.yaml", [&](std::ostream& f) { f << w.str(); });
     }
 
-    // The bag appears under its name only complete: rosbag writes a temporary
-    // file beside it (checking each write and the close), which is then
-    // synced, size-checked and renamed (core/common/safe_write.h).
     const std::string bag_path = opt.out + "/drive.bag";
-    fm::SafeFileWriter bag_file(bag_path);
     rosbag::Bag bag;
     try {
-      bag.open(bag_file.tempPath(), rosbag::bagmode::Write);
+      bag.open(bag_path, rosbag::bagmode::Write);
     } catch (const rosbag::BagException& e) {
       std::cerr << "make_drive: cannot write " << bag_path << ": " << e.what() << "\n";
       return 2;
@@ -486,8 +482,6 @@ int main(int argc, char** argv) {
       }
     }
     bag.close();
-    bag_file.adoptWrittenFile();
-    bag_file.commit();
     const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count();
     if (isatty(STDERR_FILENO)) std::fprintf(stderr, "\n");
     std::printf("make_drive: %s preset, seed %u: %d frame sets x %zu cameras (%zu images written, %zu dropped) "

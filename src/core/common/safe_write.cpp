@@ -157,13 +157,6 @@ void SafeFileWriter::writeAt(const void* data, size_t n, uint64_t offset) {
   }
 }
 
-void SafeFileWriter::adoptWrittenFile() {
-  if (fd_ < 0) fail(path_, "adopted after commit");
-  struct stat st {};
-  if (::fstat(fd_, &st) != 0) fail(path_, "cannot read the size of " + tmp_ + ": " + osError(errno));
-  size_ = static_cast<uint64_t>(st.st_size);
-}
-
 void SafeFileWriter::commit(bool keep_previous) {
   if (fd_ < 0) fail(path_, "committed twice");
   const int fd = fd_;

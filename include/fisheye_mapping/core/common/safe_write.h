@@ -65,12 +65,6 @@ class SafeFileWriter {
   // copy), replacing an older .1.
   void commit(bool keep_previous = false);
 
-  // For a library that writes a file only by its name (rosbag): it writes
-  // tempPath() (opened again by name, truncating it) and closes it, checking
-  // its own writes; adoptWrittenFile() then takes the file's size as what was
-  // written, so that commit() syncs, checks, closes and renames it as above.
-  void adoptWrittenFile();
-
  private:
   std::string path_, tmp_;
   int fd_ = -1;
