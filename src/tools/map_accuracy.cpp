@@ -16,10 +16,12 @@
 // counted in the first line of output. Exit status: 0, 1 on unreadable or empty
 // input or an output that cannot be written (--csv: written under a temporary
 // name, renamed once complete), 2 on bad options.
+#include <pcl/conversions.h>
 #include <pcl/io/pcd_io.h>
 #include <pcl/point_types.h>
 
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -50,8 +52,14 @@ Points load(const std::string& path) {
   const auto bytes = std::filesystem::file_size(path, ec);
   if (ec) throw std::runtime_error("cannot read " + path + ": " + ec.message());
   if (bytes == 0) throw std::runtime_error(path + " is empty (0 bytes), not a PCD cloud");
+  // Read as a blob first: PCL 1.13's conversion to points takes &cloud[0] of
+  // an empty cloud (undefined behaviour, UBSan's report), so a file of no
+  // points is answered here.
+  pcl::PCLPointCloud2 blob;
+  if (pcl::io::loadPCDFile(path, blob) != 0) throw std::runtime_error("cannot read " + path + " as a PCD cloud");
+  if (std::uint64_t(blob.width) * blob.height == 0) throw std::runtime_error(path + " has no finite point (no point)");
   Cloud c;
-  if (pcl::io::loadPCDFile(path, c) != 0) throw std::runtime_error("cannot read " + path + " as a PCD cloud");
+  pcl::fromPCLPointCloud2(blob, c);
   Points out;
   out.p.reserve(c.size());
   for (const auto& q : c) {
