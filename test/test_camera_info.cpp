@@ -240,7 +240,8 @@ TEST(CameraInfo, RigErrorsNameTheCamera) {
 }
 
 TEST(CameraInfo, ScaledForAHalfResolutionDepthImage) {
-  const CameraModel& cam = loadRig().cameras[0].model;
+  const Rig rig = loadRig();  // kept: cam refers into it
+  const CameraModel& cam = rig.cameras[0].model;
   const sensor_msgs::CameraInfo msg = scaledCameraInfo(cam, 0.5, "front_optical", ros::Time());
   EXPECT_EQ(msg.width, 512u);
   EXPECT_EQ(msg.height, 272u);
