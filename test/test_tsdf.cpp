@@ -5,6 +5,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <limits>
 
 #include <gtest/gtest.h>
 
@@ -295,6 +296,116 @@ TEST(TsdfUpdate, GreyAverageByHand) {
   unsigned char black = 0;
   fm_grey_update(&black, 0.0f, 0.0f);  // black is stored as 1: 0 means none
   EXPECT_EQ(black, 1);
+}
+
+// fm_tsdf_fuse (the branch-free update the CPU integrator vectorizes) against
+// the rule by hand: the same values as fm_tsdf_update + fm_grey_update, and a
+// voxel left bit-identical when there is no measurement or it is behind the
+// band.
+TEST(TsdfUpdate, FuseFollowsTheRuleByHandAndLeavesTheRestAlone) {
+  const float mu = 0.2f, max_w = 3.0f;
+  FmVoxel v{0.0f, 0.0f};
+  unsigned char g = 0;
+  // range 4.9 m, measured 5.0 m: eta 0.1, d 0.5; first grey is the value.
+  EXPECT_EQ(fm_tsdf_fuse(&v, &g, 5.0f, 4.9f, 200.0f, mu, max_w), 1);
+  EXPECT_NEAR(v.tsdf, 0.5f, 1e-5f);
+  EXPECT_EQ(v.weight, 1.0f);
+  EXPECT_EQ(g, 200);
+  // eta -0.1 (in the band, behind): d -0.5, D = (0.5 - 0.5) / 2 = 0; grey (200 + 100) / 2.
+  EXPECT_EQ(fm_tsdf_fuse(&v, &g, 5.0f, 5.1f, 100.0f, mu, max_w), 1);
+  EXPECT_NEAR(v.tsdf, 0.0f, 1e-5f);
+  EXPECT_EQ(v.weight, 2.0f);
+  EXPECT_EQ(g, 150);
+  // eta 1.0 (free space): d clamped to 1, D = 1/3; outside the band the grey is kept.
+  EXPECT_EQ(fm_tsdf_fuse(&v, &g, 6.0f, 5.0f, 0.0f, mu, max_w), 1);
+  EXPECT_NEAR(v.tsdf, 1.0f / 3.0f, 1e-5f);
+  EXPECT_EQ(v.weight, 3.0f);
+  EXPECT_EQ(g, 150);
+  // No image (g < 0): the distance is fused, the grey kept; the weight stays at the cap.
+  EXPECT_EQ(fm_tsdf_fuse(&v, &g, 5.0f, 5.0f, -1.0f, mu, max_w), 1);
+  EXPECT_NEAR(v.tsdf, (3.0f / 3.0f + 0.0f) / 4.0f, 1e-5f);
+  EXPECT_EQ(v.weight, 3.0f);
+  EXPECT_EQ(g, 150);
+  // Nothing to fuse: behind the band, NaN, inf, zero and negative ranges.
+  const FmVoxel before = v;
+  const float none[] = {4.7999f, std::numeric_limits<float>::quiet_NaN(), std::numeric_limits<float>::infinity(),
+                        0.0f, -3.0f};
+  for (float measured : none) {
+    EXPECT_EQ(fm_tsdf_fuse(&v, &g, measured, 5.0f, 10.0f, mu, max_w), 0) << measured;
+    EXPECT_EQ(std::memcmp(&v, &before, sizeof(v)), 0) << measured;
+    EXPECT_EQ(g, 150) << measured;
+  }
+  // Exactly -mu behind: fused as D = -1 (the rule's edge).
+  FmVoxel e{0.0f, 0.0f};
+  unsigned char ge = 0;
+  EXPECT_EQ(fm_tsdf_fuse(&e, &ge, 5.0f, 5.2f, 50.0f, 0.2f, max_w), 1);
+  EXPECT_NEAR(e.tsdf, -1.0f, 1e-4f);
+}
+
+// fm_tsdf_voxel_pixel: the nearest pixel of a point's projection, by hand with
+// a pinhole camera (fx = fy = 100, centre (49.5, 29.5), 100 x 60 pixels).
+TEST(TsdfUpdate, VoxelPixelIsTheNearestPixelInsideTheImage) {
+  const CameraModel cam = CameraModel::pinhole(test::makeIntrinsics(100, 100, 49.5, 29.5, 100, 60));
+  const FmCameraT<float> c = cam.floatParams();
+  auto pixelOf = [&](double u, double v) {  // a point at z = 2 m projecting to (u, v)
+    return fm_tsdf_voxel_pixel(&c, static_cast<float>((u - 49.5) / 100 * 2), static_cast<float>((v - 29.5) / 100 * 2),
+                               2.0f);
+  };
+  EXPECT_EQ(pixelOf(10.2, 20.4), 20 * 100 + 10);
+  EXPECT_EQ(pixelOf(10.6, 20.6), 21 * 100 + 11);
+  EXPECT_EQ(pixelOf(-0.4, -0.4), 0);         // within half a pixel of the first
+  EXPECT_EQ(pixelOf(99.4, 59.4), 59 * 100 + 99);
+  EXPECT_EQ(pixelOf(-0.6, 10.0), -1);        // left of the image
+  EXPECT_EQ(pixelOf(99.6, 10.0), -1);        // right of it
+  EXPECT_EQ(pixelOf(10.0, 59.6), -1);        // below it
+  EXPECT_EQ(fm_tsdf_voxel_pixel(&c, 0.0f, 0.0f, -2.0f), -1);  // behind the camera
+  EXPECT_EQ(fm_tsdf_voxel_pixel(&c, 1e30f, 0.0f, 1e-30f), -1);  // far outside: no overflow
+  EXPECT_EQ(fm_tsdf_voxel_pixel(&c, std::numeric_limits<float>::quiet_NaN(), 0.0f, 2.0f), -1);
+}
+
+// Allocation (the vectorized row samples): every pixel's surface point, computed
+// here in double precision from the camera model, lies in an allocated block
+// that integration then updated near the surface, for a fisheye frame with
+// pixels outside the model's domain, NaN, inf and beyond max_range.
+TEST(TsdfMap, EverySurfacePointLandsInAnAllocatedBlock) {
+  TsdfConfig cfg;
+  cfg.max_range = 3.0;
+  TsdfMap map(cfg);
+  const CameraModel cam = smallFisheye();
+  const Eigen::Isometry3d T_W_C = lookAt(Eigen::Vector3d(-1.0, 0.4, 1.8), Eigen::Vector3d(3, 0, 0.3));
+  cv::Mat depth = objectsScene().render(cam, T_W_C);
+  for (int v = 0; v < depth.rows; v += 7) depth.at<float>(v, v % depth.cols) = std::numeric_limits<float>::infinity();
+  for (int v = 3; v < depth.rows; v += 11) depth.at<float>(v, (2 * v) % depth.cols) = -1.0f;
+  // The map's world is the scene's shifted off the block grid (the ground
+  // plane z = 0 would lie on block faces).
+  const Eigen::Isometry3d T_M_C = Eigen::Translation3d(0.13, 0.17, 0.21) * T_W_C;
+  map.integrate(depth, cam, T_M_C, Eigen::Vector3d(0, 0, 0));
+  const double block = cfg.blockSize();
+  size_t checked = 0, missing = 0, beyond = 0, far = 0;
+  for (int v = 0; v < depth.rows; ++v) {
+    for (int u = 0; u < depth.cols; ++u) {
+      const float d = depth.at<float>(v, u);
+      Eigen::Vector3d ray;
+      if (!(d > 0.0f) || !std::isfinite(d) || !cam.unproject(Eigen::Vector2d(u, v), &ray)) continue;
+      const Eigen::Vector3d q = T_M_C * (ray.normalized() * d) / block;
+      // Points within 1e-4 of a block face may fall either side in float.
+      if (((q.array() - q.array().round()).abs() < 1e-4).any()) continue;
+      const BlockIndex b(q.array().floor().cast<int>());
+      if (d > cfg.max_range) {
+        ++far;
+        beyond += map.block(b) == nullptr;
+        continue;
+      }
+      ++checked;
+      missing += map.block(b) == nullptr;
+    }
+  }
+  std::cout << checked << " surface points checked, " << missing << " outside the allocated blocks; " << beyond
+            << " of " << far << " beyond max_range in blocks never allocated\n";
+  EXPECT_GT(checked, 5000u);
+  EXPECT_EQ(missing, 0u);
+  EXPECT_GT(far, 1000u);
+  EXPECT_GT(beyond, far / 2);  // some points beyond max_range fell in blocks nothing else touched
 }
 
 // A parked car that drove off (issue 31): a box fused as a car, then the wall

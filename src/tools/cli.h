@@ -51,6 +51,19 @@ struct HelpRequested {};
 // Consumes and returns the value of the option being handled.
 using NextValue = std::function<std::string()>;
 
+// A tool whose stages run concurrently on the same cores (offline_mapper)
+// wants idle OpenMP threads to sleep rather than spin, or one stage's waiting
+// threads take CPU from the others (docs/benchmarks.md). libgomp reads
+// OMP_WAIT_POLICY only when it is loaded, so when the variable is unset this
+// sets it to passive and runs the tool again in the same process (exec, once:
+// the variable is set then). A user's own OMP_WAIT_POLICY is kept; if the exec
+// fails the tool goes on as it is.
+inline void rerunWithPassiveOpenMpWait(char** argv) {
+  if (std::getenv("OMP_WAIT_POLICY") != nullptr) return;
+  if (setenv("OMP_WAIT_POLICY", "passive", 1) != 0) return;
+  execv("/proc/self/exe", argv);
+}
+
 // The option loop of the tools. Walks argv[first..argc): -h / --help throws
 // HelpRequested; any other argument goes to handle(arg, next), where next()
 // consumes the argument after it (UsageError "<arg> needs a value" when there is

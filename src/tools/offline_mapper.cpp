@@ -200,6 +200,7 @@ std::vector<std::string> imageTopics(const fm::Rig& rig, const std::vector<std::
 }  // namespace
 
 int main(int argc, char** argv) {
+  cli::rerunWithPassiveOpenMpWait(argv);
   std::string bag_path, camchain, mount, out, config_path, detector = "nanodet", world = "map", depth_src = "sweep";
   std::string save_depth, model_yaml;
   std::string config_dir = FM_CONFIG_DIR;

@@ -30,6 +30,7 @@
 
 #include <omp.h>
 
+#include "fisheye_mapping/core/common/cpu_features.h"
 #include "fisheye_mapping/core/depth/plane_sweep.h"
 
 namespace fisheye_mapping {
@@ -84,28 +85,10 @@ namespace native_avx512 {
 
 namespace {
 
-bool cpuHasAvx512() {
-#ifdef FM_NATIVE_HAVE_AVX2
-  __builtin_cpu_init();
-  return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
-         __builtin_cpu_supports("avx512dq") && __builtin_cpu_supports("avx512bw") && getenv("FM_NO_AVX512") == nullptr;
-#else
-  return false;
-#endif
-}
-
-bool cpuHasAvx2() {
-#ifdef FM_NATIVE_HAVE_AVX2
-  __builtin_cpu_init();
-  return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
-#else
-  return false;
-#endif
-}
-
 class NativeSweepBackend : public SweepBackend {
  public:
-  NativeSweepBackend() : avx2_(cpuHasAvx2()), avx512_(cpuHasAvx512()) {}
+  NativeSweepBackend()
+      : avx2_(cpuSimdLevel() == SimdLevel::kAvx2), avx512_(cpuSimdLevel() == SimdLevel::kAvx512) {}
 
   std::string name() const override { return std::string("native cpu (") + (avx512_ ? "avx512" : avx2_ ? "avx2+fma" : "baseline") + ")"; }
 

@@ -1,5 +1,7 @@
 #include "fisheye_mapping/core/tsdf/tsdf_map.h"
 
+#include "fisheye_mapping/core/tsdf/tsdf_integrator_cpu.h"
+
 #include <omp.h>
 
 #include <algorithm>
@@ -101,35 +103,43 @@ IntegrationStats TsdfMap::integrate(const cv::Mat& depth, const CameraModel& cam
   const float inv_block = static_cast<float>(1.0 / config_.blockSize());
   const float step = static_cast<float>(0.5 * config_.blockSize());
   const int n_steps = static_cast<int>(std::ceil(2.0f * mu / step)) + 1;
-  const Eigen::Matrix3f R = T_W_C.linear().cast<float>();
-  const Eigen::Vector3f t = T_W_C.translation().cast<float>();
+  float R[9], t[3];
+  for (int r = 0; r < 3; ++r) {
+    t[r] = static_cast<float>(T_W_C.translation()(r));
+    for (int c = 0; c < 3; ++c) R[3 * r + c] = static_cast<float>(T_W_C.linear()(r, c));
+  }
   const int w = camera.width(), h = camera.height();
+  const float* rays = table.rays.data()->data();  // Eigen::Vector3f: 3 packed floats
   // A team never has more threads than num_threads asks for.
   std::vector<std::vector<BlockIndex>> per_thread(nthreads);
   size_t valid_pixels = 0;
 #pragma omp parallel num_threads(nthreads) reduction(+ : valid_pixels)
   {
     std::vector<BlockIndex>& out = per_thread[omp_get_thread_num()];
-    // Direct-mapped cache of recently emitted blocks: neighbouring pixels
-    // mostly cross the same blocks.
+    // Each row's samples (tsdfRowBlockSamples, vectorized), then deduplicated:
+    // neighbouring pixels mostly cross the same blocks, so a sample equal to
+    // the previous pixel's at the same step is dropped at once, and the rest
+    // go through a direct-mapped cache of recently emitted blocks.
+    std::vector<float> scratch(5 * static_cast<size_t>(w));
+    std::vector<int> keys(3 * static_cast<size_t>(n_steps) * w), valid(w);
     constexpr int kCache = 4096;
     std::vector<BlockIndex> cache(kCache, BlockIndex(INT32_MIN, INT32_MIN, INT32_MIN));
 #pragma omp for schedule(dynamic, 8)
     for (int v = 0; v < h; ++v) {
-      for (int u = 0; u < w; ++u) {
-        const size_t i = static_cast<size_t>(v) * w + u;
-        const float d = d_ptr[i];
-        if (!(d > 0.0f) || d > 1e30f) continue;
-        const Eigen::Vector3f& ray = table.rays[i];
-        if (!(ray.z() == ray.z())) continue;
-        ++valid_pixels;
-        const Eigen::Vector3f dir_W = R * ray;
-        const float start = std::max(d - mu, 0.0f);
-        const float length = d + mu - start;
-        for (int s = 0; s < n_steps; ++s) {
-          const float r = start + length * s / (n_steps - 1);
-          const Eigen::Vector3f p = t + r * dir_W;
-          const BlockIndex b((p * inv_block).array().floor().cast<int>());
+      const size_t row = static_cast<size_t>(v) * w;
+      tsdfRowBlockSamples(d_ptr + row, rays + 3 * row, w, R, t, mu, inv_block, n_steps, scratch.data(), keys.data(),
+                          valid.data());
+      for (int u = 0; u < w; ++u) valid_pixels += valid[u];
+      for (int s = 0; s < n_steps; ++s) {
+        const int* kx = keys.data() + 3 * s * w;
+        const int* ky = kx + w;
+        const int* kz = ky + w;
+        BlockIndex last(INT32_MIN, INT32_MIN, INT32_MIN);
+        for (int u = 0; u < w; ++u) {
+          if (!valid[u]) continue;
+          const BlockIndex b(kx[u], ky[u], kz[u]);
+          if (b == last) continue;
+          last = b;
           const size_t slot = BlockIndexHash()(b) & (kCache - 1);
           if (cache[slot] == b) continue;
           cache[slot] = b;

@@ -24,6 +24,17 @@ class TsdfIntegratorCpu : public TsdfIntegrator {
   int threads_;                         // 0: the OpenMP default at each call
 };
 
+// Allocation samples of one image row for TsdfMap::integrate, in the best
+// instruction set the CPU has (rowBlockSamples in tsdf_integrator_cpu_impl.h):
+// for each pixel u of the row with a measurement and a ray, the blocks of
+// n_steps points spread evenly over [max(d - mu, 0), d + mu] along its ray.
+// depth: w ranges; rays: 3 w floats (unit rays, NaN outside the domain);
+// R_W_C: row-major 3x3, t_W_C: 3 (camera to world); scratch: 5 w floats;
+// keys: 3 n_steps w ints, block coordinate a of step s at keys[(3 s + a) w + u];
+// valid: w ints, 0 where the pixel has no samples.
+void tsdfRowBlockSamples(const float* depth, const float* rays, int w, const float R_W_C[9], const float t_W_C[3],
+                         float mu, float inv_block, int n_steps, float* scratch, int* keys, int* valid);
+
 }  // namespace fisheye_mapping
 
 #endif  // FISHEYE_MAPPING_CORE_TSDF_TSDF_INTEGRATOR_CPU_H_

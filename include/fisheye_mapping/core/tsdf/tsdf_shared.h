@@ -71,12 +71,66 @@ FM_FN void fm_grey_update(FM_GLOBAL unsigned char* grey, float w, float g) {
   *grey = (unsigned char)value;
 }
 
+/* The pixel whose measurement a voxel takes: the nearest pixel to the
+ * projection of the voxel's centre (x, y, z), given in the camera frame, as
+ * row * width + column; -1 when the centre is outside the model's domain or
+ * the image. Branch-free (selects), so that a loop over voxels vectorizes; the
+ * projection is clamped to the image before the conversion to int, so that the
+ * conversion is defined for any point. */
+FM_FN int fm_tsdf_voxel_pixel(const FM_CAM_FLOAT* cam, float x, float y, float z) {
+  float u, vv;
+  int ok = fm_project(cam, x, y, z, &u, &vv);
+  const float w = (float)cam->width;
+  const float h = (float)cam->height;
+  ok = ok & (u >= -0.5f ? 1 : 0) & (vv >= -0.5f ? 1 : 0) & (u < w ? 1 : 0) & (vv < h ? 1 : 0);
+  u = ok ? u : 0.0f;
+  vv = ok ? vv : 0.0f;
+  /* nearest pixel */
+  const int iu = (int)(u + 0.5f);
+  const int iv = (int)(vv + 0.5f);
+  ok = ok & (iu < cam->width ? 1 : 0) & (iv < cam->height ? 1 : 0);
+  return ok ? iv * cam->width + iu : -1;
+}
+
+/* Fuses one pixel's measurement into a voxel: measured is the pixel's range
+ * along its ray (NaN, inf or non-positive: none), range the voxel centre's
+ * distance from the camera, g the pixel's grey value (0..255; negative: no
+ * image). eta = measured - range is fused by fm_tsdf_update's rule, and a
+ * voxel within the truncation band of the surface (|eta| <= mu) takes g into
+ * *grey (fm_grey_update). The same arithmetic as those two, written with
+ * selects and unconditional stores of the kept value, so that a loop over a
+ * block's voxels vectorizes. Returns 1 if the voxel changed. */
+FM_FN int fm_tsdf_fuse(FM_GLOBAL struct FmVoxel* v, FM_GLOBAL unsigned char* grey, float measured, float range,
+                       float g, float mu, float max_weight) {
+  const float eta = measured - range;
+  /* a measurement (not NaN, inf or <= 0), and the voxel not behind the band */
+  const int ok = (measured > 0.0f ? 1 : 0) & (measured <= 1e30f ? 1 : 0) & (eta >= -mu ? 1 : 0);
+  float d = eta / mu;
+  d = d > 1.0f ? 1.0f : d;
+  const float w = v->weight;
+  const float t = v->tsdf;
+  const float t_new = (w * t + d) / (w + 1.0f);
+  const float w_new = (w + 1.0f < max_weight) ? w + 1.0f : max_weight;
+  v->tsdf = ok ? t_new : t;
+  v->weight = ok ? w_new : w;
+  const int old_grey = (int)(*grey);
+  float wg = (w < FM_GREY_MAX_WEIGHT) ? w : FM_GREY_MAX_WEIGHT;
+  wg = old_grey == 0 ? 0.0f : wg;
+  float value = (wg * (float)old_grey + g) / (wg + 1.0f) + 0.5f;
+  value = value < 1.0f ? 1.0f : value;
+  value = value > 255.0f ? 255.0f : value;
+  const int take_grey = ok & (g >= 0.0f ? 1 : 0) & (eta <= mu ? 1 : 0);
+  *grey = (unsigned char)(take_grey ? (int)value : old_grey);
+  return ok;
+}
+
 /* Integrates the depth map into one voxel whose centre is p_W (world frame).
  * T_C_W is row-major 3x4 (rotation | translation) mapping world to camera.
  * depth: row-major, width x height metres of range along the ray, NaN invalid.
  * image: the same camera's grey image (width x height bytes, row-major), or
- * 0 (no intensity); a voxel within the truncation band of the surface
- * (|eta| <= mu) takes the nearest pixel's grey into *grey (fm_grey_update). */
+ * 0 (no intensity). fm_tsdf_voxel_pixel, then fm_tsdf_fuse (the OpenCL
+ * kernel's per-voxel work; the CPU integrator runs the same two functions in
+ * vectorized loops over a block). */
 FM_FN int fm_tsdf_integrate_voxel(FM_GLOBAL struct FmVoxel* v, FM_GLOBAL unsigned char* grey, float px, float py,
                                   float pz, const FM_CAM_FLOAT* cam, const float* T_C_W,
                                   FM_GLOBAL const float* depth, FM_GLOBAL const unsigned char* image, float mu,
@@ -84,31 +138,12 @@ FM_FN int fm_tsdf_integrate_voxel(FM_GLOBAL struct FmVoxel* v, FM_GLOBAL unsigne
   const float x = T_C_W[0] * px + T_C_W[1] * py + T_C_W[2] * pz + T_C_W[3];
   const float y = T_C_W[4] * px + T_C_W[5] * py + T_C_W[6] * pz + T_C_W[7];
   const float z = T_C_W[8] * px + T_C_W[9] * py + T_C_W[10] * pz + T_C_W[11];
-  float u, vv;
-  if (!fm_project(cam, x, y, z, &u, &vv)) {
+  const int pixel = fm_tsdf_voxel_pixel(cam, x, y, z);
+  if (pixel < 0) {
     return 0;
   }
-  /* nearest pixel */
-  const int iu = (int)(u + 0.5f);
-  const int iv = (int)(vv + 0.5f);
-  if (u < -0.5f || vv < -0.5f || iu < 0 || iv < 0 || iu >= cam->width || iv >= cam->height) {
-    return 0;
-  }
-  const int pixel = iv * cam->width + iu;
-  const float measured = depth[pixel];
-  if (!(measured > 0.0f) || measured != measured || measured > 1e30f) {
-    return 0; /* NaN, inf or non-positive: no measurement */
-  }
-  const float range = FM_SQRT(x * x + y * y + z * z);
-  const float eta = measured - range;
-  const float w_before = v->weight;
-  if (!fm_tsdf_update(v, eta, mu, max_weight)) {
-    return 0;
-  }
-  if (image && eta <= mu) {
-    fm_grey_update(grey, w_before, (float)image[pixel]);
-  }
-  return 1;
+  const float g = image ? (float)image[pixel] : -1.0f;
+  return fm_tsdf_fuse(v, grey, depth[pixel], FM_SQRT(x * x + y * y + z * z), g, mu, max_weight);
 }
 
 #ifndef FM_OPENCL
