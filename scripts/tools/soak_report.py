@@ -6,7 +6,7 @@ usage: soak_report.py SAMPLES.csv PLAYER.yaml --warmup M --max-growth P --summar
 
 SAMPLES.csv is scripts/tools/soak_sampler.py's (a row a minute: per process its
 pid and the median and maximum of its resident memory, per stage its counts);
-PLAYER.yaml the paced player's summary (played, fused, skipped, timed_out,
+PLAYER.yaml the paced player's summary (played, fused, skipped, lost, timed_out,
 stopped_on_bad_input, wall_s). The soak fails when
   - a process grew by more than P % of its resident memory (the minute's
     median) from the row of minute M to the last row, or exited ("gone") or
@@ -78,7 +78,7 @@ def verdict(rows, counts, warmup, max_growth, map_process="fusion_manager"):
             if growth > max_growth:
                 failures.append(f"{p} grew by {growth:.1f} % ({judged}: {b:.1f} -> {e:.1f} MB) after minute {warmup}")
     played, fused = int(counts.get("played", -1)), int(counts.get("fused", -2))
-    for key in ["skipped", "timed_out"]:
+    for key in ["skipped", "lost", "timed_out"]:
         if counts and counts.get(key, "0") != "0":
             failures.append(f"player: {key} {counts[key]}")
     if counts and played != fused:
@@ -126,7 +126,7 @@ def main():
                   f"last {last.get('tsdf_mesh_triangles', '?')}."]
     wall = float(counts.get("wall_s", "nan"))
     lines += ["", f"Player: {counts.get('played', '?')} frame sets played, {counts.get('fused', '?')} fused, "
-                  f"{counts.get('skipped', '?')} skipped, {counts.get('timed_out', '?')} timed out, in "
+                  f"{counts.get('skipped', '?')} skipped, {counts.get('lost', '0')} lost, {counts.get('timed_out', '?')} timed out, in "
                   f"{'?' if math.isnan(wall) else f'{wall:.0f}'} s.", "",
               "Result: " + ("PASS" if not failures else "FAIL: " + "; ".join(failures))]
     with open(args.summary, "w") as f:

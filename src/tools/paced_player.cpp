@@ -1,7 +1,9 @@
 // paced_player: plays a logged drive (rosbag) so that no frame set is lost,
 // whatever the speed of the machine. It publishes /clock and the bag's
 // messages in order, and before each new frame set (a new stamp on the
-// reference camera) it waits until the pipeline has finished the previous one:
+// reference camera) it waits until the pipeline has finished the one
+// ~in_flight sets back (default 2: the previous but one, so that the depth of
+// the new set overlaps the fusion of the last, as on a live car):
 // the TSDF fusion stage sends a fisheye_mapping/FrameDone per depth frame
 // (topic ~done_topic). A frame set that is not finished within ~timeout
 // seconds is counted as timed out and the drive goes on.
@@ -16,6 +18,8 @@
 //   reference_topic  the reference camera's image topic (default: the first)
 //   done_topic     default /fusion_done
 //   timeout        seconds to wait for one frame set (default 120)
+//   in_flight      frame sets in the pipeline at once, 1 to 16 (default 2;
+//                  1: each set waits for the one before, no stages overlap)
 //   wait_subscribers  seconds to wait for the pipeline to subscribe (default 120)
 //   start          seconds into the bag to begin (default 0)
 //   loops          play the drive this many times in a row (default 1; a
@@ -64,6 +68,7 @@
 #include <tf2_msgs/TFMessage.h>
 #include <topic_tools/shape_shifter.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
@@ -153,13 +158,14 @@ std::string cameraInfoTopic(const std::string& image_topic) {
 const char* kUsage =
     "usage: rosrun fisheye_mapping paced_player _bag:=drive.bag _camchain:=camchain.yaml _mount:=mount.yaml\n"
     "  Plays a rosbag so that no frame set is lost: before each new frame set it waits\n"
-    "  for the pipeline's fisheye_mapping/FrameDone of the previous one. Parameters (private):\n"
+    "  for the pipeline's fisheye_mapping/FrameDone of the one ~in_flight sets back. Parameters (private):\n"
     "  ~bag               the rosbag (required)\n"
     "  ~camchain, ~mount  the rig whose cameras' rostopic fields name the image topics\n"
     "  ~image_topics      or the image topics as a list\n"
     "  ~reference_topic   the reference camera's image topic (default: the first)\n"
     "  ~done_topic        default /fusion_done\n"
     "  ~timeout           seconds to wait for one frame set (default 120)\n"
+    "  ~in_flight         frame sets in the pipeline at once, 1 to 16 (default 2: stages overlap)\n"
     "  ~wait_subscribers  seconds to wait for the pipeline to subscribe (default 120)\n"
     "  ~start             seconds into the bag to begin (default 0)\n"
     "  ~loops             play the drive this many times, each pass later in time (default 1)\n"
@@ -204,7 +210,7 @@ int main(int argc, char** argv) {
   std::string bag_path, camchain, mount, reference_topic, done_topic = "/fusion_done", summary_file;
   std::vector<std::string> image_topics;
   double timeout = 120.0, wait_subscribers = 120.0, start = 0.0, stop_after = 0.0;
-  int loops = 1;
+  int loops = 1, in_flight = 2;
   bool require_tf = true, hold = true, publish_camera_info = false;
   pnh.getParam("bag", bag_path);
   pnh.getParam("camchain", camchain);
@@ -216,6 +222,7 @@ int main(int argc, char** argv) {
   pnh.getParam("wait_subscribers", wait_subscribers);
   pnh.getParam("start", start);
   pnh.getParam("loops", loops);
+  pnh.getParam("in_flight", in_flight);
   pnh.getParam("stop_after", stop_after);
   pnh.getParam("require_tf", require_tf);
   pnh.getParam("summary_file", summary_file);
@@ -233,6 +240,7 @@ int main(int argc, char** argv) {
   };
   if (bad_number("timeout", timeout, 0.001, 86400) || bad_number("wait_subscribers", wait_subscribers, 0, 86400) ||
       bad_number("start", start, 0, 1e7) || bad_number("loops", loops, 1, 1e6) ||
+      bad_number("in_flight", in_flight, 1, 16) ||
       bad_number("stop_after", stop_after, 0, 1e7)) {
     return 2;
   }
@@ -305,7 +313,7 @@ int main(int argc, char** argv) {
   }
   std::unique_ptr<fm::FramePacer> pacer;
   try {
-    pacer = std::make_unique<fm::FramePacer>(reference_topic, image_topics);
+    pacer = std::make_unique<fm::FramePacer>(reference_topic, image_topics, in_flight);
   } catch (const std::exception& e) {
     ROS_FATAL("paced_player: %s", e.what());
     return 2;
@@ -444,16 +452,25 @@ int main(int argc, char** argv) {
     }
   }
 
-  int timed_out = 0, bad_input = 0;
+  int timed_out = 0, lost = 0, bad_input = 0;
   std::vector<double> played;
+  // Waits until the pipeline has finished the frame set `stamp`. The stages
+  // keep the frame sets' order, so once a later set is finished this one never
+  // will be (a stage dropped it on the way): it is counted as lost at once
+  // rather than after ~timeout.
   auto waitFor = [&](double stamp) {
     std::unique_lock<std::mutex> lock(done.mutex);
+    const auto later_done = [&] { return !done.frames.empty() && done.frames.rbegin()->first > stamp; };
     const bool got = done.cv.wait_for(lock, std::chrono::duration<double>(timeout), [&] {
-      return done.frames.count(stamp) > 0 || !ros::ok();
+      return done.frames.count(stamp) > 0 || later_done() || !ros::ok();
     });
     if (!got) {
       ++timed_out;
       ROS_WARN("paced_player: frame set %.3f not finished by the pipeline within %.0f s; going on", stamp, timeout);
+    } else if (done.frames.count(stamp) == 0 && later_done()) {
+      ++lost;
+      ROS_WARN("paced_player: frame set %.3f never reached the fusion stage (a later one was finished first: "
+               "dropped on the way); going on", stamp);
     }
   };
   const auto t0 = std::chrono::steady_clock::now();
@@ -546,7 +563,10 @@ int main(int argc, char** argv) {
       }
     }
   }
-  if (!played.empty() && ros::ok()) waitFor(played.back());
+  for (double stamp : pacer->unwaited()) {  // the last sets in flight (played: not one held back by ~stop_after)
+    if (!ros::ok()) break;
+    if (std::binary_search(played.begin(), played.end(), stamp)) waitFor(stamp);
+  }
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 
   int fused = 0, skipped = 0;
@@ -563,13 +583,13 @@ int main(int argc, char** argv) {
       }
     }
   }
-  ROS_INFO("paced_player: frame sets %zu played, %d fused, %d skipped, %d timed out; %.1f s (%.2f frame sets/s)",
-           played.size(), fused, skipped, timed_out, wall, played.size() / std::max(wall, 1e-9));
+  ROS_INFO("paced_player: frame sets %zu played, %d fused, %d skipped, %d lost, %d timed out; %.1f s (%.2f frame sets/s)",
+           played.size(), fused, skipped, lost, timed_out, wall, played.size() / std::max(wall, 1e-9));
   if (!summary_file.empty()) {
     try {
       fm::cli::writeTextAtomically(summary_file, [&](std::ostream& f) {
         f << "played: " << played.size() << "\nfused: " << fused << "\nskipped: " << skipped
-          << "\ntimed_out: " << timed_out << "\nstopped_on_bad_input: " << (bad_input ? "true" : "false")
+          << "\nlost: " << lost << "\ntimed_out: " << timed_out << "\nstopped_on_bad_input: " << (bad_input ? "true" : "false")
           << "\nstopped_after_s: " << (stopped_early ? stop_after : 0.0)
           << "\nwall_s: " << wall << "\n";
       });

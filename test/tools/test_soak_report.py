@@ -59,11 +59,14 @@ class SoakVerdict(unittest.TestCase):
         failures, _ = soak_report.verdict(gone, GOOD_PLAYER, warmup=2, max_growth=10)
         self.assertIn("m exited or was respawned", failures[0])
 
-    def test_a_frame_set_not_fused_or_timed_out_fails(self):
+    def test_a_frame_set_not_fused_lost_or_timed_out_fails(self):
         rows = [row(2, "5", "400.0", "400.0"), row(3, "5", "400.0", "400.0")]
         player = dict(GOOD_PLAYER, fused="119", timed_out="1")
         failures, _ = soak_report.verdict(rows, player, warmup=2, max_growth=10)
         self.assertEqual(failures, ["player: timed_out 1", "player: 120 frame sets played but 119 fused"])
+        player = dict(GOOD_PLAYER, fused="119", lost="1")  # dropped on the way to the fusion stage
+        failures, _ = soak_report.verdict(rows, player, warmup=2, max_growth=10)
+        self.assertEqual(failures, ["player: lost 1", "player: 120 frame sets played but 119 fused"])
         failures, _ = soak_report.verdict(rows, None, warmup=2, max_growth=10)
         self.assertEqual(failures, ["the player wrote no summary (see launch.log)"])
 

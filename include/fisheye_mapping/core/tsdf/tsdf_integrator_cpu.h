@@ -1,8 +1,11 @@
 // CPU TSDF integration: an OpenMP loop over the touched blocks (dynamic
-// schedule, four blocks a chunk), calling fm_tsdf_integrate_voxel
-// (tsdf_shared.h) for each voxel. Threads: TsdfConfig::threads as the loop's
-// num_threads clause (0: the OpenMP default); the process-wide OpenMP
-// settings are left alone. Not thread-safe (see TsdfIntegrator).
+// schedule, four blocks a chunk); each block's 512 voxels go through
+// fm_tsdf_voxel_pixel and fm_tsdf_fuse (tsdf_shared.h, the OpenCL kernel's
+// functions) in vectorized loops (tsdf_integrator_cpu_impl.h, built for the
+// baseline, AVX2 and AVX-512; the best the CPU has runs). Threads:
+// TsdfConfig::threads as the loop's num_threads clause (0: the OpenMP
+// default); the process-wide OpenMP settings are left alone. Not thread-safe
+// (see TsdfIntegrator).
 #ifndef FISHEYE_MAPPING_CORE_TSDF_TSDF_INTEGRATOR_CPU_H_
 #define FISHEYE_MAPPING_CORE_TSDF_TSDF_INTEGRATOR_CPU_H_
 
