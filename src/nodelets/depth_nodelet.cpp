@@ -5,8 +5,8 @@
 // diagnostics: docs/nodelets.md#fisheye_mappingdepth; every parameter:
 // docs/parameters.md.
 // - frames are read only while an output has a subscriber; they go through a
-//   one-set mailbox to a worker thread (a newer set replaces a waiting one:
-//   dropped "busy").
+//   mailbox of ~input_queue sets (default 1) to a worker thread (a newer set
+//   replaces the oldest waiting one when it is full: dropped "busy").
 // - depth/image (range along the ray), depth/image_z, depth/cost,
 //   depth/uniqueness and depth/camera_info carry the reference image's header;
 //   depth/self_calibration is latched after each self-calibration update.
@@ -108,7 +108,8 @@ class DepthNodelet : public nodelet::Nodelet {
     reconfigure_ = std::make_unique<dynamic_reconfigure::Server<DepthReconfigureConfig>>(reconfigure_mutex_, pnh);
     reconfigure_->setCallback([this](DepthReconfigureConfig& c, uint32_t level) { onReconfigure(c, level); });
     save_service_ = pnh.advertiseService("save_calibration", &DepthNodelet::saveCalibration, this);
-    worker_ = std::make_unique<LatestWorker<CameraFrameSetConstPtr>>([this](CameraFrameSetConstPtr& set) { work(set); });
+    worker_ = std::make_unique<LatestWorker<CameraFrameSetConstPtr>>(
+        [this](CameraFrameSetConstPtr& set) { work(set); }, opts_.input_queue);
     advertise(nh);
   }
 

@@ -92,6 +92,10 @@ const ParamTable<DepthNodeOptions>& DepthNodeOptions::params() {
               "rig_source camera_info: the tf frame the cameras are mounted on")
         .flag("publish_uniqueness", [](C& c) -> bool& { return c.publish_uniqueness; },
               "Also publish depth/uniqueness (best / second-best cost)")
+        .number("input_queue", [](C& c) -> int& { return c.input_queue; }, R::between(1, 16), "",
+                "Frame sets that may wait while the sweep works: 1 (live) drops a waiting set when a newer one "
+                "comes (counted as busy); a paced player with N frame sets in flight needs N (vehicle.launch "
+                "sets it)")
         .text("self_calibration_file", [](C& c) -> std::string& { return c.self_calibration_file; },
               "Self-calibrated camchain written by save_calibration and on shutdown (its mount beside it as "
               "<name>_mount.yaml; the old ones kept as .1; relative: inside save_directory; empty: no save on "

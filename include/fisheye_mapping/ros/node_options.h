@@ -65,6 +65,9 @@ struct DepthNodeOptions {
   RigSourceOptions rig;
   std::string base_frame = "base_link";
   bool publish_uniqueness = false;
+  // Frame sets that may wait while the sweep works (LatestWorker's mailbox):
+  // 1, live: the newest wins; a paced player with N frame sets in flight: N.
+  int input_queue = 1;
   // Where save_calibration (empty request) and the save on shutdown write the
   // self-calibrated camchain (relative: inside save.save_directory); empty: no
   // save on shutdown.
