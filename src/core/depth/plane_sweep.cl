@@ -22,12 +22,24 @@
 /* warped[v * npix + pix]: intensity of view v at the plane point of ref pixel
  * pix, -1 where unusable. A zero ray marks a reference pixel that is masked
  * or outside the model's domain; self-masked pixels of the views' images hold
- * -1. */
+ * -1. A pixel of a tile whose samples no swept window reads
+ * (needed[(plane * tiles_y + ty) * tiles_x + tx] == 0: the plane's active
+ * tiles grown by one tile, which covers a window radius up to FM_SWEEP_TILE)
+ * is not warped and holds -1. */
 __kernel void sweep_warp(__global const float* restrict rays, int npix, __global const FmSweepPlane* restrict planes,
                          int plane, __global const FmCamera* restrict cams, __global const FmViewPose* restrict poses,
                          int views, __global const float* restrict images, __global const int* restrict offsets,
+                         __global const uchar* restrict needed, int width, int tiles_x, int tiles_y,
                          __global float* restrict warped) {
   int pix = get_global_id(0);
+  int y = pix / width;
+  int x = pix - y * width;
+  if (!needed[((size_t)plane * tiles_y + y / FM_SWEEP_TILE) * tiles_x + x / FM_SWEEP_TILE]) {
+    for (int v = 0; v < FM_SWEEP_VIEWS; ++v) {
+      warped[v * npix + pix] = -1.0f;
+    }
+    return;
+  }
   float rx = rays[3 * pix], ry = rays[3 * pix + 1], rz = rays[3 * pix + 2];
   float inv_t = fm_plane_inverse_range(planes[plane], rx, ry, rz);
   for (int v = 0; v < FM_SWEEP_VIEWS; ++v) {
@@ -58,13 +70,15 @@ inline void sweep_row(__global const float* restrict warped, __global const floa
   }
 }
 
-/* One work item per column x and band of `band` rows: running window sums
- * down the band (add the row entering the window, remove the one leaving),
- * so each output costs two window rows rather than a whole window. The
- * costs of the supporting views are aggregated into the cost volume's slice
- * for `plane`; a pixel of a tile where the plane is not swept
- * (active[(plane * tiles_y + ty) * tiles_x + tx] == 0, tiles of FM_SWEEP_TILE
- * pixels) gets FM_COST_INVALID. */
+/* One work item per column x and band of `band` rows. The band is cut at tile
+ * rows (tiles of FM_SWEEP_TILE pixels): in a tile where the plane is swept
+ * (active[(plane * tiles_y + ty) * tiles_x + tx] != 0) the window sums are
+ * started afresh from the rows above it and run down the tile (add the row
+ * entering the window, remove the one leaving), so each output costs about
+ * two window rows, and a pixel's cost depends only on its own tile's rows:
+ * the same whether or not the tiles around it are swept. A tile where the
+ * plane is not swept costs nothing and gets FM_COST_INVALID. The costs of the
+ * supporting views are aggregated into the cost volume's slice for `plane`. */
 __kernel void sweep_cost(__global const float* restrict warped, __global const float* restrict ref,
                          __global const float* restrict ref_mean, __global const float* restrict ref_std,
                          int width, int height, int band, int mode, int k, int plane,
@@ -75,31 +89,36 @@ __kernel void sweep_cost(__global const float* restrict warped, __global const f
   int y1 = y0 + band < height ? y0 + band : height;
   int npix = width * height;
   __global float* out = volume + (size_t)plane * (size_t)npix;
-  if (x < FM_SWEEP_RADIUS || x >= width - FM_SWEEP_RADIUS) {
-    for (int y = y0; y < y1; ++y) {
-      out[y * width + x] = FM_COST_INVALID;
-    }
-    return;
-  }
+  const int inside = x >= FM_SWEEP_RADIUS && x < width - FM_SWEEP_RADIUS;
+  const float n = (float)((2 * FM_SWEEP_RADIUS + 1) * (2 * FM_SWEEP_RADIUS + 1));
   float sw[FM_SWEEP_VIEWS], sww[FM_SWEEP_VIEWS], swr[FM_SWEEP_VIEWS], sv[FM_SWEEP_VIEWS],
       costs[FM_SWEEP_VIEWS];
-  for (int v = 0; v < FM_SWEEP_VIEWS; ++v) {
-    sw[v] = sww[v] = swr[v] = sv[v] = 0.0f;
-  }
-  for (int y = y0 - FM_SWEEP_RADIUS; y < y0 + FM_SWEEP_RADIUS; ++y) {
-    sweep_row(warped, ref, npix, width, height, x, y, 1.0f, sw, sww, swr, sv);
-  }
-  const float n = (float)((2 * FM_SWEEP_RADIUS + 1) * (2 * FM_SWEEP_RADIUS + 1));
-  for (int y = y0; y < y1; ++y) {
-    sweep_row(warped, ref, npix, width, height, x, y + FM_SWEEP_RADIUS, 1.0f, sw, sww, swr, sv);
-    int i = y * width + x;
-    float mean_r = ref_mean[i], std_r = ref_std[i];
-    for (int v = 0; v < FM_SWEEP_VIEWS; ++v) {
-      costs[v] = sv[v] == n ? fm_zncc_cost(n, sw[v], sww[v], swr[v], mean_r, std_r) : FM_COST_INVALID;
+  for (int ty = y0 / FM_SWEEP_TILE; ty <= (y1 - 1) / FM_SWEEP_TILE; ++ty) {
+    int ya = ty * FM_SWEEP_TILE > y0 ? ty * FM_SWEEP_TILE : y0;
+    int yb = (ty + 1) * FM_SWEEP_TILE < y1 ? (ty + 1) * FM_SWEEP_TILE : y1;
+    int on = active[((size_t)plane * tiles_y + ty) * tiles_x + x / FM_SWEEP_TILE];
+    if (!on || !inside) {
+      for (int y = ya; y < yb; ++y) {
+        out[y * width + x] = FM_COST_INVALID;
+      }
+      continue;
     }
-    int on = active[((size_t)plane * tiles_y + y / FM_SWEEP_TILE) * tiles_x + x / FM_SWEEP_TILE];
-    out[i] = on ? fm_aggregate(costs, FM_SWEEP_VIEWS, mode, k) : FM_COST_INVALID;
-    sweep_row(warped, ref, npix, width, height, x, y - FM_SWEEP_RADIUS, -1.0f, sw, sww, swr, sv);
+    for (int v = 0; v < FM_SWEEP_VIEWS; ++v) {
+      sw[v] = sww[v] = swr[v] = sv[v] = 0.0f;
+    }
+    for (int y = ya - FM_SWEEP_RADIUS; y < ya + FM_SWEEP_RADIUS; ++y) {
+      sweep_row(warped, ref, npix, width, height, x, y, 1.0f, sw, sww, swr, sv);
+    }
+    for (int y = ya; y < yb; ++y) {
+      sweep_row(warped, ref, npix, width, height, x, y + FM_SWEEP_RADIUS, 1.0f, sw, sww, swr, sv);
+      int i = y * width + x;
+      float mean_r = ref_mean[i], std_r = ref_std[i];
+      for (int v = 0; v < FM_SWEEP_VIEWS; ++v) {
+        costs[v] = sv[v] == n ? fm_zncc_cost(n, sw[v], sww[v], swr[v], mean_r, std_r) : FM_COST_INVALID;
+      }
+      out[i] = fm_aggregate(costs, FM_SWEEP_VIEWS, mode, k);
+      sweep_row(warped, ref, npix, width, height, x, y - FM_SWEEP_RADIUS, -1.0f, sw, sww, swr, sv);
+    }
   }
 }
 

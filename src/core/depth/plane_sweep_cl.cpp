@@ -1,7 +1,11 @@
 // OpenCL plane sweep: sweep_warp + sweep_cost per plane into a cost volume
 // on the device, sweep_select once per scale (src/core/depth/plane_sweep.cl).
 // Programs are built once per device; buffers grow as needed and are reused
-// from frame to frame; ray tables are uploaded only when they change.
+// from frame to frame; ray tables are uploaded only when they change. Work
+// is skipped where the sweep's plane activity (SweepLevel::active) allows:
+// a plane active in no tile is not warped; pixels whose samples no active
+// window reads are not warped; a column's band with no active tile is not
+// summed.
 #include <algorithm>
 #include <cstring>
 #include <map>
@@ -72,6 +76,25 @@ class ClSweepBackend : public SweepBackend {
     active_host_ = level.active;
     if (active_host_.empty()) active_host_.assign(tiles * n_planes, 1);
     upload(&s.active, active_host_.size(), active_host_.data());
+    // Where each plane's samples are read: its active tiles grown by one tile
+    // (a window reaches at most its radius, no more than a tile, beyond its
+    // pixel); every tile when the radius is larger.
+    needed_host_.assign(active_host_.size(), level.radius > FM_SWEEP_TILE ? 1 : 0);
+    if (level.radius <= FM_SWEEP_TILE) {
+      for (int p = 0; p < n_planes; ++p) {
+        const uint8_t* a = active_host_.data() + p * tiles;
+        uint8_t* n = needed_host_.data() + p * tiles;
+        for (int ty = 0; ty < tiles_y; ++ty) {
+          for (int tx = 0; tx < tiles_x; ++tx) {
+            if (!a[ty * tiles_x + tx]) continue;
+            for (int y = std::max(0, ty - 1); y <= std::min(tiles_y - 1, ty + 1); ++y) {
+              for (int x = std::max(0, tx - 1); x <= std::min(tiles_x - 1, tx + 1); ++x) n[y * tiles_x + x] = 1;
+            }
+          }
+        }
+      }
+    }
+    upload(&s.needed, needed_host_.size(), needed_host_.data());
     reserve(&s.warped, static_cast<size_t>(views) * img_bytes, CL_MEM_READ_WRITE);
     reserve(&s.volume, static_cast<size_t>(n_planes) * img_bytes, CL_MEM_READ_WRITE);
     reserve(&s.range, img_bytes, CL_MEM_WRITE_ONLY);
@@ -87,7 +110,11 @@ class ClSweepBackend : public SweepBackend {
     warp_.setArg(6, views);
     warp_.setArg(7, s.images.buffer);
     warp_.setArg(8, s.offsets.buffer);
-    warp_.setArg(9, s.warped.buffer);
+    warp_.setArg(9, s.needed.buffer);
+    warp_.setArg(10, w);
+    warp_.setArg(11, tiles_x);
+    warp_.setArg(12, tiles_y);
+    warp_.setArg(13, s.warped.buffer);
     const int band = config.band_rows;
     cost_.setArg(0, s.warped.buffer);
     cost_.setArg(1, s.ref.buffer);
@@ -141,7 +168,7 @@ class ClSweepBackend : public SweepBackend {
     size_t capacity = 0;
   };
   struct Slot {
-    Buf rays, images, planes, cams, poses, offsets, ref, mean, stdev, warped, volume, range, cost, ratio, active;
+    Buf rays, images, planes, cams, poses, offsets, ref, mean, stdev, warped, volume, range, cost, ratio, active, needed;
     unsigned rays_version = 0;
     int rays_pixels = -1;
   };
@@ -180,7 +207,7 @@ class ClSweepBackend : public SweepBackend {
   Slot slots_[4];
   std::vector<int> offsets_host_;
   std::vector<float> images_host_;
-  std::vector<uint8_t> active_host_;
+  std::vector<uint8_t> active_host_, needed_host_;
 };
 
 }  // namespace
