@@ -207,12 +207,12 @@ int runPlayer(const std::string& name, const std::string& bag, std::string* log,
 
 }  // namespace
 
-// ~in_flight 1: each frame set after the previous one is finished.
+// ~in_flight 1 (the default): each frame set after the previous one is finished.
 TEST(PacedPlayer, EveryFrameSetIsPlayedAfterThePreviousOneIsFinished) {
   Pipeline pipeline;
   const std::string summary = "/tmp/fisheye_mapping_paced_" + std::to_string(getpid()) + "_summary.yaml";
   std::string log;
-  const int status = runPlayer("player_good", writeBag("good", 6, true, true), &log, summary, true, {{"in_flight", "1"}});
+  const int status = runPlayer("player_good", writeBag("good", 6, true, true), &log, summary);
   ASSERT_EQ(status, 0) << log;
   std::lock_guard<std::mutex> lock(pipeline.mutex);
   EXPECT_EQ(pipeline.seen.size(), 6u) << log;
@@ -225,14 +225,15 @@ TEST(PacedPlayer, EveryFrameSetIsPlayedAfterThePreviousOneIsFinished) {
   EXPECT_NE(yaml.find("timed_out: 0\n"), std::string::npos) << yaml;
 }
 
-// The default, ~in_flight 2: the next frame set goes out while the last is
+// ~in_flight 2 (vehicle.launch's): the next frame set goes out while the last is
 // still in the pipeline (stages overlap), never a third; the last two are
 // waited for at the end, so every set is finished when the player ends.
-TEST(PacedPlayer, TwoFrameSetsInFlightByDefault) {
+TEST(PacedPlayer, TwoFrameSetsInFlight) {
   Pipeline pipeline;
   const std::string summary = "/tmp/fisheye_mapping_paced_" + std::to_string(getpid()) + "_two.yaml";
   std::string log;
-  ASSERT_EQ(runPlayer("player_two", writeBag("two", 6, true, true), &log, summary), 0) << log;
+  ASSERT_EQ(runPlayer("player_two", writeBag("two", 6, true, true), &log, summary, true, {{"in_flight", "2"}}), 0)
+      << log;
   {
     std::lock_guard<std::mutex> lock(pipeline.mutex);
     EXPECT_EQ(pipeline.seen.size(), 6u) << log;
@@ -254,8 +255,8 @@ TEST(PacedPlayer, AFrameSetDroppedOnTheWayIsLostAtOnce) {
   Pipeline pipeline(2);
   const std::string summary = "/tmp/fisheye_mapping_paced_" + std::to_string(getpid()) + "_lost.yaml";
   std::string log;
-  ASSERT_EQ(runPlayer("player_lost", writeBag("lost", 6, true, true), &log, summary, true, {{"timeout", "30.0"}}), 0)
-      << log;
+  ASSERT_EQ(runPlayer("player_lost", writeBag("lost", 6, true, true), &log, summary, true,
+                      {{"timeout", "30.0"}, {"in_flight", "2"}}), 0) << log;
   const std::string yaml = readFile(summary);
   EXPECT_NE(yaml.find("played: 6\n"), std::string::npos) << yaml;
   EXPECT_NE(yaml.find("fused: 5\n"), std::string::npos) << yaml;

@@ -2,8 +2,10 @@
 // whatever the speed of the machine. It publishes /clock and the bag's
 // messages in order, and before each new frame set (a new stamp on the
 // reference camera) it waits until the pipeline has finished the one
-// ~in_flight sets back (default 2: the previous but one, so that the depth of
-// the new set overlaps the fusion of the last, as on a live car):
+// ~in_flight sets back (default 1: the previous one; vehicle.launch plays with
+// 2, the previous but one, so that the depth of the new set overlaps the
+// fusion of the last, as on a live car; that needs the depth stage's
+// ~input_queue at 2 as well):
 // the TSDF fusion stage sends a fisheye_mapping/FrameDone per depth frame
 // (topic ~done_topic). A frame set that is not finished within ~timeout
 // seconds is counted as timed out and the drive goes on.
@@ -18,8 +20,9 @@
 //   reference_topic  the reference camera's image topic (default: the first)
 //   done_topic     default /fusion_done
 //   timeout        seconds to wait for one frame set (default 120)
-//   in_flight      frame sets in the pipeline at once, 1 to 16 (default 2;
-//                  1: each set waits for the one before, no stages overlap)
+//   in_flight      frame sets in the pipeline at once, 1 to 16 (default 1:
+//                  each set waits for the one before; more needs the depth
+//                  stage's ~input_queue as large, or sets are dropped as busy)
 //   wait_subscribers  seconds to wait for the pipeline to subscribe (default 120)
 //   start          seconds into the bag to begin (default 0)
 //   loops          play the drive this many times in a row (default 1; a
@@ -165,7 +168,8 @@ const char* kUsage =
     "  ~reference_topic   the reference camera's image topic (default: the first)\n"
     "  ~done_topic        default /fusion_done\n"
     "  ~timeout           seconds to wait for one frame set (default 120)\n"
-    "  ~in_flight         frame sets in the pipeline at once, 1 to 16 (default 2: stages overlap)\n"
+    "  ~in_flight         frame sets in the pipeline at once, 1 to 16 (default 1; 2 overlaps the stages:\n"
+    "                     give the depth node ~input_queue 2 too, as vehicle.launch does)\n"
     "  ~wait_subscribers  seconds to wait for the pipeline to subscribe (default 120)\n"
     "  ~start             seconds into the bag to begin (default 0)\n"
     "  ~loops             play the drive this many times, each pass later in time (default 1)\n"
@@ -210,7 +214,7 @@ int main(int argc, char** argv) {
   std::string bag_path, camchain, mount, reference_topic, done_topic = "/fusion_done", summary_file;
   std::vector<std::string> image_topics;
   double timeout = 120.0, wait_subscribers = 120.0, start = 0.0, stop_after = 0.0;
-  int loops = 1, in_flight = 2;
+  int loops = 1, in_flight = 1;
   bool require_tf = true, hold = true, publish_camera_info = false;
   pnh.getParam("bag", bag_path);
   pnh.getParam("camchain", camchain);

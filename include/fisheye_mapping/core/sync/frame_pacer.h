@@ -8,7 +8,7 @@
 // reference image of set k+1 goes out, the player waits until the pipeline
 // has finished set k+1-in_flight (the TSDF stage acknowledges each depth
 // frame by its stamp, the reference image's). With 1, each set waits for the
-// one before; with 2 (paced_player's default) the depth of set k+1 is
+// one before; with 2 (vehicle.launch's default) the depth of set k+1 is
 // computed while set k is detected, masked and fused, as the stages run on
 // a live car. The second set always waits for the first (the pipeline's
 // first set builds its rig and starts its workers). Everything else is published in bag order: the other cameras'
