@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Rotation error of the online self-calibration over a drive, per camera:
+"""Rotation (and translation) error of the online self-calibration over a drive, per camera:
 offline_mapper's self_calibration.csv (each supporting camera's rotation
 relative to cam0 after each update) against the drive's true calibration
 (camchain_true.yaml, or camchain.yaml for an exact drive; after a
@@ -9,7 +9,9 @@ usage: self_calibration_error.py DRIVE_DIR SELF_CALIBRATION_CSV   (markdown on s
 
 Prints the error as given, at the first update, after 10 s of drive, 3 s
 after the knock (if any) and at the end, in degrees; drive time 0 is the
-first update's stamp (the first frame set).
+first update's stamp (the first frame set). When the CSV has the
+translations (t_ref_cam_*_m), a second table gives the translation error
+(mm) at the same times.
 """
 import csv
 import os
@@ -40,6 +42,11 @@ def rel_rotations(path):
     return {cam: np.linalg.inv(T)[:3, :3] for cam, T in chain(path).items()}
 
 
+def rel_translations(path):
+    """t_cam0_cam of every camera of a camchain (metres)."""
+    return {cam: np.linalg.inv(T)[:3, 3] for cam, T in chain(path).items()}
+
+
 def main():
     if len(sys.argv) != 3:
         sys.exit(__doc__.strip())
@@ -54,17 +61,27 @@ def main():
         with open(os.path.join(drive, "knock.yaml")) as f:
             knock = yaml.safe_load(f)
         knocked = rel_rotations(os.path.join(drive, "camchain_knocked.yaml"))
+    true_t = rel_translations(true_path)
+    given_t = rel_translations(os.path.join(drive, "camchain.yaml"))
+    if knock:
+        knocked_t = rel_translations(os.path.join(drive, "camchain_knocked.yaml"))
     rows = list(csv.DictReader(open(csv_path)))
+    has_t = bool(rows) and "t_ref_cam_x_m" in rows[0]
     if not rows:
         sys.exit(f"{csv_path}: no update")
     t0 = float(rows[0]["stamp"])
     series = {}
+    t_series = {}
     for r in rows:
         t = float(r["stamp"]) - t0
         cam = r["camera"]
         R = rotvec_to_matrix([r["rotvec_ref_cam_x_deg"], r["rotvec_ref_cam_y_deg"], r["rotvec_ref_cam_z_deg"]])
         ref = knocked if knock and t >= float(knock["at_s"]) else truth
         series.setdefault(cam, []).append((t, angle_deg(ref[cam].T @ R), r["level"]))
+        if has_t:
+            ref_t = knocked_t if knock and t >= float(knock["at_s"]) else true_t
+            tv = np.array([float(r["t_ref_cam_x_m"]), float(r["t_ref_cam_y_m"]), float(r["t_ref_cam_z_m"])])
+            t_series.setdefault(cam, []).append((t, 1000 * float(np.linalg.norm(tv - ref_t[cam])), r["level"]))
 
     def at(s, t):
         """Error at the last update at or before drive time t."""
@@ -82,6 +99,14 @@ def main():
         s = series[cam]
         cells = [f"{angle_deg(truth[cam].T @ given[cam]):.3f}"] + [f"{at(s, t):.3f}" for _, t in marks]
         print(f"| {cam} | " + " | ".join(cells) + " |")
+    if has_t:
+        print("\nTranslation error (mm):\n")
+        print("| camera | given | " + " | ".join(m for m, _ in marks) + " |")
+        print("|---|---:|" + "---:|" * len(marks))
+        for cam in sorted(t_series):
+            s = t_series[cam]
+            cells = [f"{1000 * np.linalg.norm(given_t[cam] - true_t[cam]):.1f}"] + [f"{at(s, t):.1f}" for _, t in marks]
+            print(f"| {cam} | " + " | ".join(cells) + " |")
     if knock:
         print(f"\n{knock['camera']} knocked by {knock['deg']:g} deg at {knock['at_s']:g} s "
               f"(errors from then on against camchain_knocked.yaml).")

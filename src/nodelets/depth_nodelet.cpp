@@ -21,6 +21,7 @@
 #include <algorithm>
 #include <memory>
 #include <mutex>
+#include <optional>
 
 #include <dynamic_reconfigure/server.h>
 #include <image_transport/image_transport.h>
@@ -85,11 +86,14 @@ class DepthNodelet : public nodelet::Nodelet {
         NODELET_WARN("~allow_any_save_path is set (UNSAFE): save_calibration may write any file this node can write");
       }
       monitor_ = std::make_unique<StageMonitor>(nh, pnh, "depth");
+      // tf: the rig from camera_infos, and the poses for the self-calibration's translations.
+      if (opts_.rig.fromCameraInfo() || (config_.self_calibration.enabled && config_.self_calibration.translation)) {
+        tf_buffer_ = std::make_unique<tf2_ros::Buffer>();
+        tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_, nh);
+      }
       if (!opts_.rig.fromCameraInfo()) {
         setStage(std::make_unique<DepthStage>(loadRigFromParams(pnh), config_));
       } else {
-        tf_buffer_ = std::make_unique<tf2_ros::Buffer>();
-        tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_, nh);
         NODELET_INFO("plane sweep: rig from the frame sets' camera_infos and tf (base frame %s), reference %s",
                      opts_.base_frame.c_str(), config_.reference_camera.c_str());
       }
@@ -279,6 +283,24 @@ class DepthNodelet : public nodelet::Nodelet {
     monitor_->processed(StageStats::now() - t0);
   }
 
+  // The vehicle's pose at `stamp` for the self-calibration's translations,
+  // when it corrects them and tf has it now (never waits: the sweep goes
+  // on, and that set brings no translation evidence, said once in a while).
+  std::optional<Eigen::Isometry3d> vehiclePose(const ros::Time& stamp) {
+    if (!tf_buffer_ || !stage_->selfCalibration() || !config_.self_calibration.translation) return std::nullopt;
+    std::string why;
+    try {
+      if (tf_buffer_->canTransform(opts_.world_frame, opts_.base_frame, stamp, &why))
+        return toIsometry(tf_buffer_->lookupTransform(opts_.world_frame, opts_.base_frame, stamp));
+    } catch (const tf2::TransformException& e) {
+      why = e.what();
+    }
+    NODELET_WARN_THROTTLE(30.0, "self-calibration: no pose of %s in %s at %.3f (%s): translations not updated "
+                          "from this frame set", opts_.base_frame.c_str(), opts_.world_frame.c_str(), stamp.toSec(),
+                          why.c_str());
+    return std::nullopt;
+  }
+
   // False: dropped for want of a rig (counted there).
   bool process(const CameraFrameSetConstPtr& set) {
     if (!rigFor(*set)) return false;
@@ -287,7 +309,8 @@ class DepthNodelet : public nodelet::Nodelet {
     const int ref = stage_->reference();
     sensor_msgs::ImageConstPtr ref_img;
     const std::vector<cv::Mat> images = depthStageImages(set, *stage_, &ref_img);  // empty: not in the set
-    const DepthResult r = stage_->compute(images);
+    const std::optional<Eigen::Isometry3d> pose = vehiclePose(ref_img->header.stamp);
+    const DepthResult r = stage_->compute(images, pose ? &*pose : nullptr);
     if (r.calibration_ms > 0) noteCalibration(ref_img->header);
     if (!r.dropped_views.empty()) NODELET_INFO_ONCE("supporting view dropped: %s", r.dropped_views.front().c_str());
     for (const auto& w : r.warnings) NODELET_WARN_THROTTLE(10.0, "frame %.3f: %s", ref_img->header.stamp.toSec(), w.c_str());

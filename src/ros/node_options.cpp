@@ -89,7 +89,12 @@ const ParamTable<DepthNodeOptions>& DepthNodeOptions::params() {
     ParamTable<C> t("depth node");
     t.include(RigSourceOptions::params(), [](C& c) -> RigSourceOptions& { return c.rig; })
         .text("base_frame", [](C& c) -> std::string& { return c.base_frame; },
-              "rig_source camera_info: the tf frame the cameras are mounted on")
+              "The vehicle frame: the cameras' mounts (rig_source camera_info) and the poses looked up in "
+              "world_frame")
+        .text("world_frame", [](C& c) -> std::string& { return c.world_frame; },
+              "Fixed frame of the vehicle's poses (tf world_frame -> base_frame at each frame set's stamp): the "
+              "self-calibration corrects the translations from the motion between frame sets; without the "
+              "transform only the rotations")
         .flag("publish_uniqueness", [](C& c) -> bool& { return c.publish_uniqueness; },
               "Also publish depth/uniqueness (best / second-best cost)")
         .number("input_queue", [](C& c) -> int& { return c.input_queue; }, R::between(1, 16), "",

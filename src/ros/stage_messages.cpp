@@ -34,6 +34,10 @@ RigSelfCalibration toRigSelfCalibrationMsg(const OnlineRigCalibrator& cal, const
     m.updates = c.updates;
     m.refused = c.refused;
     m.restarts = c.restarts;
+    for (int a = 0; a < 3; ++a) m.translation_correction_mm[a] = c.translation_correction_mm[a];
+    m.translation_updates = c.translation_updates;
+    m.metric_matches = c.metric_matches;
+    m.translation_status = c.translation_status;
     msg.cameras.push_back(m);
   }
   return msg;
@@ -56,6 +60,11 @@ void addSelfCalibrationReport(diagnostic_updater::DiagnosticStatusWrapper& stat,
     std::snprintf(line, sizeof(line), "correction %.3f deg, residual %.3f deg, %d inliers, %d updates: ",
                   c.correction_deg, c.residual_deg, c.inliers, c.updates);
     stat.add("self-calibration " + c.camera, line + c.status);
+    char tline[160];
+    std::snprintf(tline, sizeof(tline), "correction [%.1f %.1f %.1f] mm, %d metric matches, %d updates: ",
+                  c.translation_correction_mm[0], c.translation_correction_mm[1], c.translation_correction_mm[2],
+                  c.metric_matches, c.translation_updates);
+    stat.add("self-calibration " + c.camera + " translation", tline + c.translation_status);
     if (c.level != diagnostic_msgs::DiagnosticStatus::OK)
       stat.mergeSummary(c.level, "self-calibration " + c.camera + ": " + c.status);
   }

@@ -211,6 +211,17 @@ double rotationErrorDeg(const fm::Rig& truth, const fm::Rig& r) {
   return e;
 }
 
+// Largest translation of a support camera relative to cam0 between two rigs, mm.
+double translationErrorMm(const fm::Rig& truth, const fm::Rig& r) {
+  double e = 0;
+  for (size_t c = 1; c < truth.cameras.size(); ++c) {
+    const Eigen::Vector3d a = (truth.cameras[0].T_base_cam.inverse() * truth.cameras[c].T_base_cam).translation();
+    const Eigen::Vector3d b = (r.cameras[0].T_base_cam.inverse() * r.cameras[c].T_base_cam).translation();
+    e = std::max(e, 1000 * (a - b).norm());
+  }
+  return e;
+}
+
 // A YAML file's map (empty map without a file), named in errors.
 YAML::Node loadYamlMap(const std::string& path) {
   YAML::Node y;
@@ -337,8 +348,8 @@ struct SelfCalibrationRun {
   std::vector<int> support_ids;
   fm::SelfCalibrationConfig every_frame;
   fm::Rig true_rotations;
-  std::unique_ptr<fm::OnlineRigCalibrator> online;
-  std::vector<RealFigures> true_figs, first_figs, online_figs, true_rot_figs;
+  std::unique_ptr<fm::OnlineRigCalibrator> online, online_rotations;  // the second: translations off
+  std::vector<RealFigures> true_figs, first_figs, online_figs, online_rot_figs, true_rot_figs;
   std::vector<double> first_err_deg, first_ms;
 };
 
@@ -354,6 +365,10 @@ SelfCalibrationRun makeSelfCalibrationRun(const Scene& s) {
     r.true_rotations = fm::withRelativePose(r.true_rotations, 0, c, T);
   }
   r.online = std::make_unique<fm::OnlineRigCalibrator>(s.given, 0, r.support_ids, std::vector<cv::Mat>{}, r.every_frame);
+  fm::SelfCalibrationConfig rotations_only = r.every_frame;
+  rotations_only.translation = false;
+  r.online_rotations =
+      std::make_unique<fm::OnlineRigCalibrator>(s.given, 0, r.support_ids, std::vector<cv::Mat>{}, rotations_only);
   return r;
 }
 
@@ -363,7 +378,13 @@ struct Frame {
   double t = 0;
   std::vector<cv::Mat> images;
   cv::Mat truth;
+  Eigen::Isometry3d T_W_B = Eigen::Isometry3d::Identity();
+  // The frame set one frame (0.2 s at 5 Hz) before, for the online
+  // self-calibration's translations (the vehicle's motion between the two).
+  std::vector<cv::Mat> before;
+  Eigen::Isometry3d T_W_B_before = Eigen::Isometry3d::Identity();
 };
+constexpr double kFrameGapS = 0.2;
 
 constexpr int kRef = 0;
 
@@ -372,12 +393,19 @@ Frame renderFrame(const Scene& s, const SyntheticOptions& o, int f) {
   fr.index = f;
   fr.t = o.start + o.step * f;
   const Eigen::Isometry3d T_W_B = s.world->egoPose(fr.t);
+  fr.T_W_B = T_W_B;
   for (size_t c = 0; c < s.rig.cameras.size(); ++c) {
     auto frame = s.world->render(s.rig.cameras[c].model, s.rays[c], T_W_B * s.rig.cameras[c].T_base_cam, fr.t,
                                  (static_cast<uint64_t>(s.wc.seed) << 32) ^ (f * 64 + c), s.sensors[c]);
     fr.images.push_back(frame.image);
     if (static_cast<int>(c) == kRef) fr.truth = frame.depth;
   }
+  const double tb = fr.t - kFrameGapS;
+  fr.T_W_B_before = s.world->egoPose(tb);
+  for (size_t c = 0; c < s.rig.cameras.size(); ++c)
+    fr.before.push_back(s.world->render(s.rig.cameras[c].model, s.rays[c], fr.T_W_B_before * s.rig.cameras[c].T_base_cam,
+                                        tb, (static_cast<uint64_t>(s.wc.seed) << 32) ^ (f * 64 + 32 + c), s.sensors[c])
+                            .image);
   return fr;
 }
 
@@ -489,12 +517,22 @@ void evaluateSelfCalibration(const Scene& s, Sweeps& sw, const Frame& fr, SelfCa
   sc.first_ms.push_back(alone.lastCallMs());
   sc.first_err_deg.push_back(rotationErrorDeg(s.rig, alone.rig()));
   sc.first_figs.push_back(figures(alone.rig()));
-  sc.online->observe(fr.images);
+  // Over the frames: the set before each one too, with the poses (the
+  // translations are corrected from the motion between the two).
+  sc.online->observe(fr.before, &fr.T_W_B_before);
+  sc.online->observe(fr.images, &fr.T_W_B);
   sc.online_figs.push_back(figures(sc.online->rig()));
+  sc.online_rotations->observe(fr.before, &fr.T_W_B_before);
+  sc.online_rotations->observe(fr.images, &fr.T_W_B);
+  sc.online_rot_figs.push_back(figures(sc.online_rotations->rig()));
   std::cerr << "  frame " << fr.index << "  self-calibration: rotation error " << std::setprecision(3)
             << rotationErrorDeg(s.rig, s.given) << " deg as given, " << sc.first_err_deg.back()
             << " deg from this frame alone (" << std::setprecision(0) << sc.first_ms.back() << " ms), "
-            << std::setprecision(3) << rotationErrorDeg(s.rig, sc.online->rig()) << " deg over the frames\n";
+            << std::setprecision(3) << rotationErrorDeg(s.rig, sc.online->rig()) << " deg over the frames; translation error "
+            << std::setprecision(1) << translationErrorMm(s.rig, s.given) << " mm as given, "
+            << translationErrorMm(s.rig, sc.online->rig()) << " mm over the frames\n";
+  for (const auto& st : sc.online->state())
+    if (!st.reference) std::cerr << "    " << st.name << " translation: " << st.translation_status << "\n";
 }
 
 // Means over frames of each configuration's figure, in the order first recorded.
@@ -563,6 +601,8 @@ std::vector<RealRow> realRows(const Scene& s, const Results& res, const SelfCali
            0.0},
           {"config/vehicle.yaml, self-calibrated from each frame alone", "vehicle_self_calibrated_frame",
            &sc.first_figs, mean(sc.first_err_deg)},
+          {"config/vehicle.yaml, self-calibrated over the frames, rotations only", "vehicle_self_calibrated_online_rotations",
+           &sc.online_rot_figs, rotationErrorDeg(s.rig, sc.online_rotations->rig())},
           {"config/vehicle.yaml, self-calibrated over the frames", "vehicle_self_calibrated_online", &sc.online_figs,
            rotationErrorDeg(s.rig, sc.online->rig())}};
 }
@@ -586,8 +626,11 @@ void writeRealRigSummary(const Scene& s, const SyntheticOptions& o, const std::v
      << " deg as given, " << std::setprecision(3) << mean(sc.first_err_deg) << " deg from one frame alone (mean, "
      << std::setprecision(0) << mean(sc.first_ms) << " ms per fit), " << std::setprecision(3)
      << rotationErrorDeg(s.rig, sc.online->rig()) << " deg after " << o.frames
-     << " frames; median relative error within 20 m " << std::setprecision(2) << relMedian(sc.first_figs) / base
-     << " x (one frame) and " << relMedian(sc.online_figs) / base << " x (over the frames) the true calibration's, "
+     << " frames; largest translation error " << std::setprecision(1) << translationErrorMm(s.rig, s.given)
+     << " mm as given, " << translationErrorMm(s.rig, sc.online->rig()) << " mm after " << o.frames
+     << " frames (the set 0.2 s before each frame given too, with the poses); median relative error within 20 m " << std::setprecision(2) << relMedian(sc.first_figs) / base
+     << " x (one frame), " << relMedian(sc.online_rot_figs) / base << " x (over the frames, rotations only) and "
+     << relMedian(sc.online_figs) / base << " x (over the frames) the true calibration's, "
      << relMedian(sc.true_rot_figs) / base << " x with the true rotations and the translations as given, "
      << relMedian(*rows[1].figs) / base << " x as given (target: at most "
      << cli::numberText(kPass.self_calibration_max_ratio) << " x).\n";

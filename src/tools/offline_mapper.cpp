@@ -335,7 +335,8 @@ int main(int argc, char** argv) {
     vehicles_csv << "stamp,x_min,y_min,x_max,y_max,score,motion,speed_mps,track,x,y,true_moving\n";
     std::ostringstream calib_csv;
     calib_csv << "stamp,camera,rotvec_ref_cam_x_deg,rotvec_ref_cam_y_deg,rotvec_ref_cam_z_deg,correction_deg,"
-                 "residual_deg,inliers,level,status\n";
+                 "residual_deg,inliers,level,status,t_ref_cam_x_m,t_ref_cam_y_m,t_ref_cam_z_m,translation_updates,"
+                 "metric_matches,translation_status\n";
     std::vector<double> t_sweep, t_det, t_mask, t_fuse, t_total;
     size_t sets_seen = 0, processed = 0, submitted = 0, skipped_pose = 0, no_boxes = 0;
     // Complete frame sets not mapped: an image that does not decode, --every.
@@ -389,14 +390,18 @@ int main(int argc, char** argv) {
         const int cal_ref = mapper.reference();
         for (const auto& c : r.calibration) {
           if (c.reference) continue;
-          const Eigen::AngleAxisd aa(
-              (now.cameras[cal_ref].T_base_cam.inverse() * now.cameras[c.camera].T_base_cam).linear());
+          const Eigen::Isometry3d T_ref_cam = now.cameras[cal_ref].T_base_cam.inverse() * now.cameras[c.camera].T_base_cam;
+          const Eigen::AngleAxisd aa(T_ref_cam.linear());
           const Eigen::Vector3d w = aa.angle() * aa.axis() * 180.0 / M_PI;
-          std::string status = c.status;
+          const Eigen::Vector3d t = T_ref_cam.translation();
+          std::string status = c.status, t_status = c.translation_status;
           std::replace(status.begin(), status.end(), ',', ';');
+          std::replace(t_status.begin(), t_status.end(), ',', ';');
           calib_csv << std::fixed << stamp.toSec() << "," << c.name << "," << w.x() << "," << w.y() << "," << w.z()
                     << "," << c.correction_deg << "," << c.residual_deg << "," << c.inliers << ","
-                    << (c.warn ? "WARN" : "OK") << "," << status << "\n";
+                    << (c.warn ? "WARN" : "OK") << "," << status << "," << std::setprecision(6) << t.x() << ","
+                    << t.y() << "," << t.z() << "," << c.translation_updates << "," << c.metric_matches << ","
+                    << t_status << "\n";
         }
       }
       if (!save_depth.empty())

@@ -64,6 +64,9 @@ struct FrameSyncNodeOptions {
 struct DepthNodeOptions {
   RigSourceOptions rig;
   std::string base_frame = "base_link";
+  // The vehicle's poses (tf world_frame -> base_frame at each frame set's
+  // stamp) let the self-calibration correct the translations.
+  std::string world_frame = "map";
   bool publish_uniqueness = false;
   // Frame sets that may wait while the sweep works (LatestWorker's mailbox):
   // 1, live: the newest wins; a paced player with N frame sets in flight: N.

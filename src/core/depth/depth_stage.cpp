@@ -90,7 +90,7 @@ void DepthStage::setSweepConfig(const PlaneSweepConfig& config) {
   sweep_ = std::make_unique<PlaneSweep>(config);
 }
 
-DepthResult DepthStage::compute(const std::vector<cv::Mat>& images) {
+DepthResult DepthStage::compute(const std::vector<cv::Mat>& images, const Eigen::Isometry3d* T_world_base) {
   if (images.size() != rig_.cameras.size())
     throw std::invalid_argument("frame set has " + std::to_string(images.size()) + " images for a rig of " +
                                 std::to_string(rig_.cameras.size()) + " cameras");
@@ -98,7 +98,7 @@ DepthResult DepthStage::compute(const std::vector<cv::Mat>& images) {
     throw std::invalid_argument("frame set has no image of the reference camera " + rig_.cameras[ref_].name);
   double calibration_ms = 0.0;
   if (calibration_) {
-    if (calibration_->observe(images)) rig_ = calibration_->rig();
+    if (calibration_->observe(images, T_world_base)) rig_ = calibration_->rig();
     calibration_ms = calibration_->lastCallMs();
   }
   const SweepView ref = rigSweepView(rig_, ref_, ref_, images[ref_], masks_[ref_]);

@@ -48,10 +48,10 @@ FrameSetMapper::FrameSetMapper(const Rig& rig, const FrameSetMapperConfig& confi
   config_.validate();
 }
 
-FrameSetResult FrameSetMapper::depthOf(const std::vector<cv::Mat>& images) {
+FrameSetResult FrameSetMapper::depthOf(const std::vector<cv::Mat>& images, const Eigen::Isometry3d* T_W_B) {
   const auto t0 = Clock::now();
   FrameSetResult r;
-  r.depth = depth_.compute(images);
+  r.depth = depth_.compute(images, T_W_B);
   r.ms.depth_ms = msSince(t0);
   if (r.depth.calibration_ms > 0 && depth_.selfCalibration()) {
     r.calibration = depth_.selfCalibration()->state();
@@ -64,7 +64,7 @@ FrameSetResult FrameSetMapper::process(const std::vector<cv::Mat>& images, const
                                        const std::optional<ImageBoxes>& boxes, double stamp_s) {
   flush();
   const auto t0 = Clock::now();
-  FrameSetResult r = depthOf(images);
+  FrameSetResult r = depthOf(images, &T_W_B);
   double detect_ms = 0;
   const ImageBoxes use = boxesFor(images[depth_.reference()], boxes, &detect_ms);
   r = maskAndFuse(std::move(r), use, T_W_B, depth_.rig().cameras[depth_.reference()], stamp_s,
@@ -108,7 +108,7 @@ std::optional<FrameSetResult> FrameSetMapper::submit(const std::vector<cv::Mat>&
                }).share();
   FrameSetResult r;
   try {
-    r = depthOf(images);
+    r = depthOf(images, &T_W_B);
   } catch (...) {
     detection_.wait();  // the detection of a frame set that is dropped
     throw;

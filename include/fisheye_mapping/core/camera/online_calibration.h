@@ -1,6 +1,7 @@
-// Online rotation self-calibration (issue 26): keeps each supporting camera's
+// Online self-calibration (issue 26): keeps each supporting camera's
 // rotation relative to the reference camera right while driving, from the
-// frame sets the depth stage sweeps anyway. No ROS.
+// frame sets the depth stage sweeps anyway, and, given the vehicle's poses,
+// its translation (below). No ROS.
 //
 // Every `period`-th frame set (and the second one; every `period_steady`-th
 // once every camera is steady: past its warm-up, its last fit below a third
@@ -36,6 +37,26 @@
 //     `max_correction_deg` is refused and reported, never applied;
 //  4. applied smoothly: the current rotation moves a fraction `gain` of the
 //     way to the fit (R <- R exp(gain log(R^T R_fit))).
+// Translations (issue 26, part 2; `translation`, with the vehicle's poses):
+// a baseline's length cannot be seen in one frame set's images, the
+// vehicle's motion between two sets can. At an update whose set and the one
+// before it have poses (the reference camera moved 0.3-5 m), the reference
+// keypoints of this update's matches are tracked into the previous set's
+// reference image (each patch first resampled by the local affine map of a
+// surface facing the camera at the depth the current rig gives it, then KLT,
+// forward-backward checked) and triangulated with the known motion: points
+// of metric position, each seen by the support cameras it was matched in.
+// Per camera, the matches of the last 6 x `window` such pairs are pooled and
+// the camera's full pose fitted (estimateCameraPose: robust Gauss-Newton on
+// the angular reprojection residual, each point weighted by its
+// triangulation's uncertainty as the camera sees it); the fit's translation
+// is applied (`gain` of the way) when both halves of the pool (whole frame
+// pairs) move it the same way, the change exceeds 4 standard errors (scaled
+// up when the halves disagree by more than their covariance allows), the
+// pool has 300 inliers or more, and its total from the given calibration is
+// at most `max_translation_mm` (else refused and reported). The rotation is
+// left to the epipolar fits above, which use the corrected translation from
+// the next update on.
 // A camera whose image is missing, black or flat (night, lens cap), or frozen
 // (the same image as at the last update while the reference image changed)
 // gets no update and a warning naming it; the others go on. A static car (the
@@ -73,6 +94,8 @@ struct SelfCalibrationConfig {
   int max_features = 3000;           // self_calibration_features: ORB keypoints per image
   bool first_set = true;             // self_calibration_first_set: correct from the first frame set on
   std::string start_file;            // self_calibration_start: a camchain saved by a previous run
+  bool translation = true;           // self_calibration_translation: also the translations, from the poses
+  double max_translation_mm = 50.0;  // self_calibration_max_translation_mm: from the given calibration
   // Throws std::invalid_argument naming the parameter.
   void validate() const;
   // The declarations (included by DepthStageConfig's table).
@@ -96,6 +119,13 @@ struct CameraCalibrationState {
   int updates = 0;                    // fits applied
   int refused = 0;                    // fits above max_correction_deg
   int restarts = 0;                   // pool restarts (a knock, or still far off)
+  // Translation (from metric matches: points triangulated by the reference
+  // camera's own motion between frame sets, seen by this camera).
+  Eigen::Vector3d translation_correction_mm = Eigen::Vector3d::Zero();  // applied, from the given, reference frame
+  int translation_updates = 0;        // translation fits applied
+  int metric_matches = 0;             // pooled metric matches of the last fit
+  double translation_last_fit_mm = 0.0;  // the last translation fit's change from the then current translation
+  std::string translation_status;     // one line, as status
 };
 
 class OnlineRigCalibrator {
@@ -111,8 +141,12 @@ class OnlineRigCalibrator {
 
   // One frame set (images[i]: rig camera i; grey or BGR, 8/16 bit or float in
   // [0, 1]; empty: not in the set). Every period-th call updates (and the
-  // second). True when the rig changed.
-  bool observe(const std::vector<cv::Mat>& images);
+  // second). True when the rig changed. T_world_base: the vehicle's pose at
+  // the set, when known (tf): with the previous set's pose it gives the
+  // reference camera's motion, which makes points of known metric position
+  // from which the supporting cameras' translations are fitted (config
+  // translation); without poses only rotations are corrected.
+  bool observe(const std::vector<cv::Mat>& images, const Eigen::Isometry3d* T_world_base = nullptr);
 
   const Rig& rig() const { return rig_; }
   const Rig& givenRig() const { return given_; }
@@ -128,6 +162,8 @@ class OnlineRigCalibrator {
   double lastUpdateMs() const { return last_ms_; }
   // Of which finding the matches (the rest: the fits).
   double lastMatchMs() const { return last_match_ms_; }
+  // Of which tracking and triangulating the metric matches.
+  double lastMetricMs() const { return last_metric_ms_; }
   // Time of the last observe() call (0 when it did not update).
   double lastCallMs() const { return last_call_ms_; }
   // Why self_calibration_start could not be used ("" if it was, or none was
@@ -160,7 +196,18 @@ class OnlineRigCalibrator {
   // R_ref_cam to apply, if any. Touches only camera c's state (update() runs
   // the cameras in parallel).
   std::optional<Eigen::Matrix3d> fitCamera(int c, std::vector<EpipolarMatch> found);
-  void applyRotation(int c, const Eigen::Matrix3d& R_ref_cam);
+  // The translation's step: the newest metric matches join camera c's metric
+  // pool, the pose fit and its tests run. Returns the translation t_ref_cam
+  // to apply, if any. Touches only camera c's state.
+  std::optional<Eigen::Vector3d> fitTranslation(int c, std::vector<MetricMatch> found);
+  // Metric matches of this set per camera: the reference camera's keypoints
+  // of `found` tracked into the previous set's reference image (KLT, from
+  // where the current rig's depth puts them; forward-backward checked),
+  // triangulated with the reference camera's motion T_cur_prev.
+  std::vector<std::vector<MetricMatch>> metricMatches(const cv::Mat& ref_grey,
+                                                      const std::vector<std::vector<EpipolarMatch>>& found,
+                                                      const Eigen::Isometry3d& T_cur_prev) const;
+  void applyPose(int c, const std::optional<Eigen::Matrix3d>& R_ref_cam, const std::optional<Eigen::Vector3d>& t_ref_cam);
   Eigen::Isometry3d relative(const Rig& rig, int c) const;
 
   Rig given_, rig_;
@@ -171,6 +218,9 @@ class OnlineRigCalibrator {
   RigMatcher matcher_;
   std::vector<std::mt19937_64> rngs_;  // per camera: RANSAC sampling (the cameras' fits run in parallel)
   std::vector<std::deque<std::vector<EpipolarMatch>>> pools_;  // per camera, newest last
+  std::vector<std::deque<std::vector<MetricMatch>>> metric_pools_;  // per camera, newest last
+  cv::Mat prev_ref_;                                           // the previous set's reference image (8-bit grey)
+  std::optional<Eigen::Isometry3d> prev_pose_, pose_;          // T_world_base of the previous and the current set
   std::vector<cv::Mat> last_thumbs_;                           // per camera, at the last update
   std::vector<char> has_far_;                 // per camera (not vector<bool>: written in parallel): the last update's newest set alone was far off
   std::vector<Eigen::Matrix3d> far_target_;   // ... and where it wanted R_ref_cam
@@ -180,7 +230,7 @@ class OnlineRigCalibrator {
   int frame_sets_ = 0, updates_ = 0;
   int next_due_ = 0;  // the frame set of the next update (besides the second set)
   int interval_ = 0;
-  double last_ms_ = 0.0, total_ms_ = 0.0, last_call_ms_ = 0.0, last_match_ms_ = 0.0;
+  double last_ms_ = 0.0, total_ms_ = 0.0, last_call_ms_ = 0.0, last_match_ms_ = 0.0, last_metric_ms_ = 0.0;
   std::string start_error_;
   bool changed_ = false;
 };

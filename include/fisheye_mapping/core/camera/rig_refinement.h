@@ -102,6 +102,8 @@ struct CameraRefinement {
   double correction_deg = 0.0;    // angle of the estimated rotation correction
   Eigen::Vector3d correction_axis = Eigen::Vector3d::Zero();  // in the camera's frame
   double translation_change_deg = 0.0;  // angle between old and new translation direction
+  double translation_change_mm = 0.0;   // estimateCameraPose: length of the translation change
+  double translation_standard_error_mm = 0.0;  // ... its standard error along the change
   double heldout_before_deg = 0.0;  // held-out truncated RMS residual, calibration (mean of both halves)
   double heldout_after_deg = 0.0;   // the same of each half's fit
   double standard_error_deg = 0.0;  // of the correction's angle
@@ -187,6 +189,34 @@ class RigMatcher {
 CameraRefinement estimateCameraCorrection(const std::vector<EpipolarMatch>& matches, const Eigen::Isometry3d& T_ref_cam,
                                           const RigRefinementConfig& config, std::mt19937_64& rng,
                                           Eigen::Isometry3d* T_estimated, const std::vector<int>& groups = {});
+
+// A support camera's observation of a point whose position in the reference
+// camera's frame is known metrically: triangulated from the reference
+// camera's own motion between two frame sets (the vehicle's poses), so it
+// carries the scale the rig's images alone cannot (the baselines' lengths).
+// f_cam: unit bearing in the support camera's frame; weight: relative inverse
+// variance of its residual.
+struct MetricMatch {
+  Eigen::Vector3d X_ref, f_cam;
+  double weight = 1.0;
+};
+
+// The full pose of one support camera (rotation and translation) fitted to
+// metric matches, T_ref_cam the rig's current: robust Gauss-Newton on the
+// angular reprojection residual from the current pose (matches beyond
+// max_initial_residual_deg dropped, then inliers re-selected at
+// ransac_threshold_deg), and the same acceptance as estimateCameraCorrection:
+// each half (whole groups: frame pairs) fitted alone and scored on the other
+// half against the current pose's score there (both must improve, the fit
+// must explain min_generalization of its own residual on the held-out one),
+// and the translation change must exceed min_significance standard errors
+// of the translation (its marginal covariance). kApplied: *T_estimated is the
+// fit (rotation and translation); else *T_estimated = T_ref_cam. The
+// result's translation_change_mm and translation_standard_error_mm say how
+// far and how sure.
+CameraRefinement estimateCameraPose(const std::vector<MetricMatch>& matches, const Eigen::Isometry3d& T_ref_cam,
+                                    const RigRefinementConfig& config, Eigen::Isometry3d* T_estimated,
+                                    const std::vector<int>& groups = {});
 
 // The rig with camera `camera`'s pose relative to `reference` replaced by
 // T_ref_cam; every camera's T_cam0_cam / T_base_cam stay consistent (cam0 may

@@ -54,8 +54,10 @@ class DepthStage {
   // DepthResult::calibration_ms, part of total_ms). images: images[i] is the image of rig camera i (grey or BGR, 8/16
   // bit or float); a missing supporting image (empty Mat) is left out and
   // named in DepthResult::warnings; a missing reference image throws
-  // std::invalid_argument. Not thread-safe (one call at a time).
-  DepthResult compute(const std::vector<cv::Mat>& images);
+  // std::invalid_argument. T_world_base: the vehicle's pose at the set when
+  // known (the self-calibration then also corrects the translations, from
+  // the motion between sets). Not thread-safe (one call at a time).
+  DepthResult compute(const std::vector<cv::Mat>& images, const Eigen::Isometry3d* T_world_base = nullptr);
 
   // Changes the filters of the sweep (dynamic reconfiguration); validated.
   void setFilters(const DepthFilterConfig& filters) { sweep_->setFilters(filters); }

@@ -130,8 +130,9 @@ class FrameSetMapper {
   // `image`: the reference camera's image (the map's intensity when it is CV_8UC1 of the camera's size).
   FrameSetResult maskAndFuse(FrameSetResult r, const ImageBoxes& boxes, const Eigen::Isometry3d& T_W_B,
                              const RigCamera& reference, double stamp_s, const cv::Mat& image = cv::Mat());
-  // The depth stage's result for the images, with the calibration snapshot.
-  FrameSetResult depthOf(const std::vector<cv::Mat>& images);
+  // The depth stage's result for the images (T_W_B: the vehicle's pose, for
+  // the self-calibration's translations), with the calibration snapshot.
+  FrameSetResult depthOf(const std::vector<cv::Mat>& images, const Eigen::Isometry3d* T_W_B = nullptr);
   FrameSetMapperConfig config_;
   DepthStage depth_;
   std::unique_ptr<Detector> detector_;
