@@ -415,9 +415,10 @@ TEST_F(OnlineCalibrationTest, CorrectsTheTranslationsFromTheVehicleMotion) {
     blind.observe((*sets_)[k]);
     std::printf("  pair %d (%.0f ms, metric matches %.0f ms):", k, cal.lastUpdateMs(), cal.lastMetricMs());
     for (int c = 1; c < 5; ++c) {
-      std::printf("  %s %.2f mm (along %.2f), %.4f deg, %d metric;", truth_->cameras[c].name.c_str(),
+      std::printf("  %s %.2f mm (along %.2f), %.4f deg, %d metric (%s);", truth_->cameras[c].name.c_str(),
                   translationErrorMm(*truth_, cal.rig(), c), lengthErrorMm(*truth_, cal.rig(), c),
-                  angleDeg(relRotation(*truth_, 0, c), relRotation(cal.rig(), 0, c)), cal.state()[c].metric_matches);
+                  angleDeg(relRotation(*truth_, 0, c), relRotation(cal.rig(), 0, c)), cal.state()[c].metric_matches,
+                  cal.state()[c].translation_status.c_str());
       exact_worst = std::max(exact_worst, translationErrorMm(*truth_, exact.rig(), c));
     }
     std::printf(" exact rig within %.2f mm\n", exact_worst);

@@ -96,6 +96,9 @@ constexpr int kMinMetricInliers = 300;
 // frame sets share errors that the residuals do not show), so a right
 // calibration would drift by that much.
 constexpr double kMinTranslationStepMm = 2.0;
+// ... and a translation fit is applied only when the rig's own epipolar
+// matches fit it no worse than this share more than the current translation.
+constexpr double kEpipolarTolerance = 0.002;
 // Search band (deg) around the current epipolar planes for a camera known to
 // be close: several times the residual of a steady camera, and above the
 // knocks the self-calibration follows within a period.
@@ -419,6 +422,25 @@ void OnlineRigCalibrator::update(const std::vector<cv::Mat>& grey) {
   }
   for (int c : supports_)
     if (failed[c]) std::rethrow_exception(failed[c]);
+  // A translation fit must not make the rig's own matches fit worse: they
+  // never saw the frame-to-frame tracks it came from (an independent check
+  // of its direction; a change of length alone leaves them as they are).
+#pragma omp parallel for schedule(dynamic)
+  for (int k = 0; k < int(cams.size()); ++k) {
+    const int c = cams[k];
+    if (!next_t[c] || pools_[c].empty()) continue;
+    std::vector<EpipolarMatch> pooled;
+    for (const auto& set : pools_[c]) pooled.insert(pooled.end(), set.begin(), set.end());
+    const Eigen::Isometry3d T = relative(rig_, c);
+    double now_deg = 0, then_deg = 0;
+    compareTranslations(pooled, next[c] ? *next[c] : T.linear(), T.translation(), *next_t[c], refinement_, &now_deg,
+                        &then_deg);
+    if (then_deg > now_deg * (1.0 + kEpipolarTolerance)) {
+      state_[c].translation_status = "translation fit not applied: the rig's own matches fit it worse (epipolar " +
+                                     fixed(now_deg, 4) + " -> " + fixed(then_deg, 4) + " deg)";
+      next_t[c].reset();
+    }
+  }
   for (int c : supports_) {
     applyPose(c, next[c], next_t[c]);
     if (next[c]) ++state_[c].updates;
@@ -493,12 +515,19 @@ std::vector<std::vector<MetricMatch>> OnlineRigCalibrator::metricMatches(
   std::vector<char> usable(N, 0);
   std::vector<cv::Point2f> centre(N), tracked(N), back(N);
   const double h = 2.0;
+  const cv::Rect image_rect(0, 0, ref_grey.cols, ref_grey.rows);
+#pragma omp parallel for schedule(static)
   for (int k = 0; k < N; ++k) {
     const Point& p = points[k];
     const int r0 = (k / kCols) * kTile, c0 = (k % kCols) * kTile;
-    centre[k] = cv::Point2f(float(c0 + kHalf), float(r0 + kHalf));
+    // The current image's patch is copied whole-pixel; the point sits at its
+    // fraction off the tile's centre.
+    const int ux = int(std::lround(p.uv.x)), uy = int(std::lround(p.uv.y));
+    centre[k] = cv::Point2f(float(c0 + kHalf) + (p.uv.x - ux), float(r0 + kHalf) + (p.uv.y - uy));
     tracked[k] = centre[k];
     back[k] = centre[k];
+    const cv::Rect src(ux - kHalf, uy - kHalf, kTile, kTile);
+    if ((src & image_rect) != src) continue;
     const Eigen::Vector3d f = p.f.normalized();
     bool ok = true;
     for (int axis = 0; axis < 2 && ok; ++axis) {
@@ -514,12 +543,13 @@ std::vector<std::vector<MetricMatch>> OnlineRigCalibrator::metricMatches(
     }
     if (!ok || !(std::abs(J[k].determinant()) > 0.2) || !(J[k].norm() < 5)) continue;
     usable[k] = 1;
-    const cv::Matx23d M_cur(1, 0, p.uv.x - kHalf, 0, 1, p.uv.y - kHalf);
-    const cv::Matx23d M_prev(J[k](0, 0), J[k](0, 1), p.pred.x - J[k](0, 0) * kHalf - J[k](0, 1) * kHalf,
-                             J[k](1, 0), J[k](1, 1), p.pred.y - J[k](1, 0) * kHalf - J[k](1, 1) * kHalf);
+    // Tile pixel x shows the previous image at pred + J (x - centre).
+    const double ox = centre[k].x - c0, oy = centre[k].y - r0;
+    const cv::Matx23d M_prev(J[k](0, 0), J[k](0, 1), p.pred.x - J[k](0, 0) * ox - J[k](0, 1) * oy,
+                             J[k](1, 0), J[k](1, 1), p.pred.y - J[k](1, 0) * ox - J[k](1, 1) * oy);
     const cv::Rect tile(c0, r0, kTile, kTile);
-    cv::Mat dst_cur = mos_cur(tile), dst_prev = mos_prev(tile);
-    cv::warpAffine(ref_grey, dst_cur, M_cur, tile.size(), cv::INTER_LINEAR | cv::WARP_INVERSE_MAP, cv::BORDER_REPLICATE);
+    ref_grey(src).copyTo(mos_cur(tile));
+    cv::Mat dst_prev = mos_prev(tile);
     cv::warpAffine(prev_ref_, dst_prev, M_prev, tile.size(), cv::INTER_LINEAR | cv::WARP_INVERSE_MAP,
                    cv::BORDER_REPLICATE);
   }
@@ -630,7 +660,10 @@ std::optional<Eigen::Vector3d> OnlineRigCalibrator::fitTranslation(int c, std::v
   s.translation_status = "correcting (fit " + fixed(fit.translation_change_mm, 1) + " mm, standard error " +
                          fixed(fit.translation_standard_error_mm, 2) + " mm, " + std::to_string(fit.inliers) +
                          " inliers)";
-  return T_cur.translation() + config_.gain * (T_fit.translation() - T_cur.translation());
+  // In full: a fit that passed the tests above is a pool of many frame pairs
+  // (the pool itself smooths), and a partial step would leave a remainder
+  // below what the significance test lets through again.
+  return T_fit.translation();
 }
 
 std::optional<Eigen::Matrix3d> OnlineRigCalibrator::fitCamera(int c, std::vector<EpipolarMatch> found) {

@@ -1047,6 +1047,42 @@ CameraRefinement estimateCameraPose(const std::vector<MetricMatch>& matches, con
   return out;
 }
 
+void compareTranslations(const std::vector<EpipolarMatch>& matches, const Eigen::Matrix3d& R0,
+                         const Eigen::Vector3d& t_a, const Eigen::Vector3d& t_b, const RigRefinementConfig& config,
+                         double* rms_a_deg, double* rms_b_deg) {
+  require(t_a.norm() > 1e-6 && t_b.norm() > 1e-6, "translation", "has no baseline");
+  const Eigen::Vector3d da = t_a.normalized();
+  std::vector<Match> cand;
+  for (const Match& m : matches)
+    if (m.f_ref.allFinite() && m.f_cam.allFinite() && m.weight > 0 &&
+        std::abs(EpipolarModel::residual(R0, da, m)) < config.max_initial_residual_deg * kDeg)
+      cand.push_back(m);
+  if (config.max_fit_matches > 0 && int(cand.size()) > config.max_fit_matches) {
+    std::vector<Match> sub;
+    const double step = double(cand.size()) / config.max_fit_matches;
+    for (int k = 0; k < config.max_fit_matches; ++k) sub.push_back(cand[size_t(k * step)]);
+    cand.swap(sub);
+  }
+  if (!cand.empty()) {
+    std::vector<double> w;
+    for (const Match& m : cand) w.push_back(m.weight);
+    std::nth_element(w.begin(), w.begin() + w.size() / 2, w.end());
+    for (Match& m : cand) m.weight /= w[w.size() / 2];
+  }
+  std::vector<int> all(cand.size());
+  std::iota(all.begin(), all.end(), 0);
+  const double tau = config.heldout_truncation_deg * kDeg;
+  const auto score = [&](const Eigen::Vector3d& t) {
+    const EpipolarModel model(R0, t, false);
+    Eigen::VectorXd x = Eigen::VectorXd::Zero(3);
+    Eigen::VectorXd xr = x;
+    if (gaussNewton(model, cand, all, config.huber_deg * kDeg, config.max_iterations, &xr)) x = xr;
+    return truncatedRms(model, cand, all, x, tau) / kDeg;
+  };
+  *rms_a_deg = score(t_a);
+  *rms_b_deg = score(t_b);
+}
+
 RigRefinementResult refineRig(const Rig& rig, int reference, const std::vector<std::vector<cv::Mat>>& frame_sets,
                               const std::vector<cv::Mat>& self_masks, const RigRefinementConfig& config) {
   config.validate();

@@ -50,7 +50,7 @@
 // the camera's full pose fitted (estimateCameraPose: robust Gauss-Newton on
 // the angular reprojection residual, each point weighted by its
 // triangulation's uncertainty as the camera sees it); the fit's translation
-// is applied (`gain` of the way) when both halves of the pool (whole frame
+// is applied (in full) when both halves of the pool (whole frame
 // pairs) move it the same way, the change exceeds 4 standard errors (scaled
 // up when the halves disagree by more than their covariance allows), the
 // pool has 300 inliers or more, and its total from the given calibration is

@@ -218,6 +218,17 @@ CameraRefinement estimateCameraPose(const std::vector<MetricMatch>& matches, con
                                     const RigRefinementConfig& config, Eigen::Isometry3d* T_estimated,
                                     const std::vector<int>& groups = {});
 
+// How well a support camera's epipolar matches fit each of two translations
+// (t_a, t_b: T_ref_cam's translation; only their directions matter), each
+// with the rotation re-fitted from R0 (Huber Gauss-Newton): the truncated RMS
+// angular epipolar residual (heldout_truncation_deg), in degrees, over the
+// matches within max_initial_residual_deg at (R0, t_a). The rig's own matches
+// never saw the frame-to-frame tracks a translation fit came from: an
+// independent check of its direction.
+void compareTranslations(const std::vector<EpipolarMatch>& matches, const Eigen::Matrix3d& R0,
+                         const Eigen::Vector3d& t_a, const Eigen::Vector3d& t_b, const RigRefinementConfig& config,
+                         double* rms_a_deg, double* rms_b_deg);
+
 // The rig with camera `camera`'s pose relative to `reference` replaced by
 // T_ref_cam; every camera's T_cam0_cam / T_base_cam stay consistent (cam0 may
 // be the corrected one).
