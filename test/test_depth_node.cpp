@@ -392,6 +392,10 @@ TEST(PlaneSweepDepthNode, SelfCalibrationStateAndSaveService) {
     EXPECT_FALSE(cam.status.empty());
     // The rig is exact: whatever the evidence, no correction beyond the noise.
     EXPECT_LT(cam.correction_deg, 0.1) << cam.status;
+    // The same images again and again (the car stands): no translation
+    // evidence, none applied.
+    EXPECT_EQ(cam.translation_updates, 0) << cam.translation_status;
+    for (int a = 0; a < 3; ++a) EXPECT_EQ(cam.translation_correction_mm[a], 0.0);
   }
   // Inside the save folder ($ROS_HOME/fisheye_mapping): a relative path.
   const char* ros_home = std::getenv("ROS_HOME");

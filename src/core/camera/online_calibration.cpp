@@ -92,10 +92,13 @@ constexpr double kTranslationSignificance = 4.0;
 // than the rotation's epipolar matches).
 constexpr int kMinMetricInliers = 300;
 // Smaller translation changes are not applied: on exact drives the pooled
-// fits sit 1-1.5 mm from the truth at 4 standard errors (tracks between
-// frame sets share errors that the residuals do not show), so a right
-// calibration would drift by that much.
-constexpr double kMinTranslationStepMm = 2.0;
+// fits sit 1-1.5 mm from the truth at 4 standard errors in the unit test's
+// scene and up to 3.5 mm on a 20 s drive with moving vehicles (tracks
+// between frame sets share errors that the residuals do not show, and a
+// vehicle driving along the road looks like a static point at another
+// depth), so a right calibration would drift by that much. A larger error
+// is corrected in full (to the fit), a smaller one is left.
+constexpr double kMinTranslationStepMm = 4.0;
 // ... and a translation fit is applied only when the rig's own epipolar
 // matches fit it no worse than this share more than the current translation.
 constexpr double kEpipolarTolerance = 0.002;
