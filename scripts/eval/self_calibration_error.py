@@ -93,20 +93,17 @@ def main():
         marks.append((f"knock + 3 s ({knock['at_s'] + 3:g} s)", float(knock["at_s"]) + 3.0))
     end = max(t for s in series.values() for (t, _, _) in s)
     marks.append((f"end ({end:.1f} s)", end))
-    print("| camera | given | " + " | ".join(m for m, _ in marks) + " |")
-    print("|---|---:|" + "---:|" * len(marks))
-    for cam in sorted(series):
-        s = series[cam]
-        cells = [f"{angle_deg(truth[cam].T @ given[cam]):.3f}"] + [f"{at(s, t):.3f}" for _, t in marks]
-        print(f"| {cam} | " + " | ".join(cells) + " |")
-    if has_t:
-        print("\nTranslation error (mm):\n")
+    def table(errors, given_error, digits):
         print("| camera | given | " + " | ".join(m for m, _ in marks) + " |")
         print("|---|---:|" + "---:|" * len(marks))
-        for cam in sorted(t_series):
-            s = t_series[cam]
-            cells = [f"{1000 * np.linalg.norm(given_t[cam] - true_t[cam]):.1f}"] + [f"{at(s, t):.1f}" for _, t in marks]
+        for cam in sorted(errors):
+            cells = [f"{given_error(cam):.{digits}f}"] + [f"{at(errors[cam], t):.{digits}f}" for _, t in marks]
             print(f"| {cam} | " + " | ".join(cells) + " |")
+
+    table(series, lambda cam: angle_deg(truth[cam].T @ given[cam]), 3)
+    if has_t:
+        print("\nTranslation error (mm):\n")
+        table(t_series, lambda cam: 1000 * np.linalg.norm(given_t[cam] - true_t[cam]), 1)
     if knock:
         print(f"\n{knock['camera']} knocked by {knock['deg']:g} deg at {knock['at_s']:g} s "
               f"(errors from then on against camchain_knocked.yaml).")

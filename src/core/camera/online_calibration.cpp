@@ -66,6 +66,15 @@ cv::Mat thumbnail(const cv::Mat& grey) {
   cv::GaussianBlur(small, small, cv::Size(3, 3), 0);
   return small;
 }
+// A pool's frame sets as one list, and each element's frame set (its group).
+template <typename T>
+void flattenPool(const std::deque<std::vector<T>>& pool, std::vector<T>* all, std::vector<int>* groups) {
+  for (size_t k = 0; k < pool.size(); ++k) {
+    all->insert(all->end(), pool[k].begin(), pool[k].end());
+    if (groups) groups->insert(groups->end(), pool[k].size(), int(k));
+  }
+}
+
 constexpr double kStill = 0.6;
 // Metric matches: the reference camera's motion between two frame sets must
 // be long enough to triangulate and short enough to track (8 m/s at 5 Hz:
@@ -433,7 +442,7 @@ void OnlineRigCalibrator::update(const std::vector<cv::Mat>& grey) {
     const int c = cams[k];
     if (!next_t[c] || pools_[c].empty()) continue;
     std::vector<EpipolarMatch> pooled;
-    for (const auto& set : pools_[c]) pooled.insert(pooled.end(), set.begin(), set.end());
+    flattenPool(pools_[c], &pooled, nullptr);
     const Eigen::Isometry3d T = relative(rig_, c);
     double now_deg = 0, then_deg = 0;
     compareTranslations(pooled, next[c] ? *next[c] : T.linear(), T.translation(), *next_t[c], refinement_, &now_deg,
@@ -620,10 +629,7 @@ std::optional<Eigen::Vector3d> OnlineRigCalibrator::fitTranslation(int c, std::v
   while (int(pool.size()) > kMetricWindowFactor * config_.window) pool.pop_front();
   std::vector<MetricMatch> pooled;
   std::vector<int> groups;
-  for (size_t k = 0; k < pool.size(); ++k) {
-    pooled.insert(pooled.end(), pool[k].begin(), pool[k].end());
-    groups.insert(groups.end(), pool[k].size(), int(k));
-  }
+  flattenPool(pool, &pooled, &groups);
   s.metric_matches = int(pooled.size());
   const Eigen::Isometry3d T_cur = relative(rig_, c);
   Eigen::Isometry3d T_fit;
@@ -694,10 +700,7 @@ std::optional<Eigen::Matrix3d> OnlineRigCalibrator::fitCamera(int c, std::vector
   while (int(pool.size()) > config_.window) pool.pop_front();
   std::vector<EpipolarMatch> pooled;
   std::vector<int> groups;
-  for (size_t k = 0; k < pool.size(); ++k) {
-    pooled.insert(pooled.end(), pool[k].begin(), pool[k].end());
-    groups.insert(groups.end(), pool[k].size(), int(k));
-  }
+  flattenPool(pool, &pooled, &groups);
   s.pooled_matches = int(pooled.size());
   // 2. The pool, with the held-out test (halves of whole frame sets) and
   //    the significance test.

@@ -783,6 +783,28 @@ CameraRefinement estimateCameraCorrection(const std::vector<EpipolarMatch>& matc
 
 namespace {
 
+// Keeps an even subsample of at most `most` elements (0: all); matches come
+// in image order, so every part of the image keeps its share.
+template <typename T>
+void keepEvenSubsample(std::vector<T>* v, int most) {
+  if (most <= 0 || int(v->size()) <= most) return;
+  std::vector<T> sub;
+  sub.reserve(most);
+  const double step = double(v->size()) / most;
+  for (int k = 0; k < most; ++k) sub.push_back((*v)[size_t(k * step)]);
+  v->swap(sub);
+}
+
+// Relative weights: 1 at the median, so that Huber's scale stays in degrees.
+template <typename T>
+void normalizeWeights(std::vector<T>* v) {
+  if (v->empty()) return;
+  std::vector<double> w;
+  for (const T& m : *v) w.push_back(m.weight);
+  std::nth_element(w.begin(), w.begin() + w.size() / 2, w.end());
+  for (T& m : *v) m.weight /= w[w.size() / 2];
+}
+
 // One metric match prepared for the pose fit: the point, the support
 // camera's bearing and two unit vectors across it (the residual is the
 // predicted bearing's components along them: its angle to the observed one,
@@ -918,18 +940,8 @@ CameraRefinement estimateCameraPose(const std::vector<MetricMatch>& matches, con
     obs.push_back(o);
   }
   out.candidates = int(obs.size());
-  if (config.max_fit_matches > 0 && int(obs.size()) > config.max_fit_matches) {
-    std::vector<PoseObs> sub;
-    const double step = double(obs.size()) / config.max_fit_matches;
-    for (int k = 0; k < config.max_fit_matches; ++k) sub.push_back(obs[size_t(k * step)]);
-    obs.swap(sub);
-  }
-  if (!obs.empty()) {
-    std::vector<double> w;
-    for (const PoseObs& o : obs) w.push_back(o.weight);
-    std::nth_element(w.begin(), w.begin() + w.size() / 2, w.end());
-    for (PoseObs& o : obs) o.weight /= w[w.size() / 2];
-  }
+  keepEvenSubsample(&obs, config.max_fit_matches);
+  normalizeWeights(&obs);
   std::vector<int> all(obs.size());
   std::iota(all.begin(), all.end(), 0);
   const double thr = config.ransac_threshold_deg * kDeg;
@@ -1057,18 +1069,8 @@ void compareTranslations(const std::vector<EpipolarMatch>& matches, const Eigen:
     if (m.f_ref.allFinite() && m.f_cam.allFinite() && m.weight > 0 &&
         std::abs(EpipolarModel::residual(R0, da, m)) < config.max_initial_residual_deg * kDeg)
       cand.push_back(m);
-  if (config.max_fit_matches > 0 && int(cand.size()) > config.max_fit_matches) {
-    std::vector<Match> sub;
-    const double step = double(cand.size()) / config.max_fit_matches;
-    for (int k = 0; k < config.max_fit_matches; ++k) sub.push_back(cand[size_t(k * step)]);
-    cand.swap(sub);
-  }
-  if (!cand.empty()) {
-    std::vector<double> w;
-    for (const Match& m : cand) w.push_back(m.weight);
-    std::nth_element(w.begin(), w.begin() + w.size() / 2, w.end());
-    for (Match& m : cand) m.weight /= w[w.size() / 2];
-  }
+  keepEvenSubsample(&cand, config.max_fit_matches);
+  normalizeWeights(&cand);
   std::vector<int> all(cand.size());
   std::iota(all.begin(), all.end(), 0);
   const double tau = config.heldout_truncation_deg * kDeg;
