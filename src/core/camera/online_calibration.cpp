@@ -66,6 +66,15 @@ cv::Mat thumbnail(const cv::Mat& grey) {
   cv::GaussianBlur(small, small, cv::Size(3, 3), 0);
   return small;
 }
+// Distances along two rays from origins 0 and `baseline` (directions a and
+// b) to where they come closest: lambda_a a - lambda_b b = baseline in the
+// least-squares sense.
+Eigen::Vector2d twoRayDepths(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& baseline) {
+  Eigen::Matrix<double, 3, 2> A;
+  A << a, -b;
+  return (A.transpose() * A).ldlt().solve(A.transpose() * baseline);
+}
+
 // A pool's frame sets as one list, and each element's frame set (its group).
 template <typename T>
 void flattenPool(const std::deque<std::vector<T>>& pool, std::vector<T>* all, std::vector<int>* groups) {
@@ -489,9 +498,7 @@ std::vector<std::vector<MetricMatch>> OnlineRigCalibrator::metricMatches(
       if (it == index.end()) {
         // Depth from this match with the current rig (a guess: the previous
         // image is searched around where it puts the point).
-        Eigen::Matrix<double, 3, 2> A;
-        A << m.f_ref, -(T.linear() * m.f_cam);
-        const Eigen::Vector2d lambda = (A.transpose() * A).ldlt().solve(A.transpose() * T.translation());
+        const Eigen::Vector2d lambda = twoRayDepths(m.f_ref, T.linear() * m.f_cam, T.translation());
         const double depth = lambda.allFinite() && lambda.x() > 1.0 && lambda.x() < 80.0 ? lambda.x() : 20.0;
         Eigen::Vector2d pred;
         if (!model.project(T_prev_cur * (depth * m.f_ref), &pred)) continue;
@@ -571,9 +578,8 @@ std::vector<std::vector<MetricMatch>> OnlineRigCalibrator::metricMatches(
   std::vector<float> err;
   cv::calcOpticalFlowPyrLK(mos_cur, mos_prev, centre, tracked, ok, err, win, 0, crit, cv::OPTFLOW_USE_INITIAL_FLOW);
   cv::calcOpticalFlowPyrLK(mos_prev, mos_cur, tracked, back, ok_back, err, win, 0, crit, cv::OPTFLOW_USE_INITIAL_FLOW);
-  std::vector<cv::Point2f> cur(N), prev(N);
+  std::vector<cv::Point2f> prev(N);
   for (int k = 0; k < N; ++k) {
-    cur[k] = points[k].uv;
     const Eigen::Vector2d d(tracked[k].x - centre[k].x, tracked[k].y - centre[k].y);
     const Eigen::Vector2d q = Eigen::Vector2d(points[k].pred.x, points[k].pred.y) + J[k] * d;
     prev[k] = cv::Point2f(float(q.x()), float(q.y()));
@@ -597,9 +603,7 @@ std::vector<std::vector<MetricMatch>> OnlineRigCalibrator::metricMatches(
     const Eigen::Vector3d nrm = C_dir.cross(f);
     if (nrm.norm() < 1e-3 || std::abs(nrm.normalized().dot(g)) > max_epipolar) continue;
     if (f.dot(g) > min_parallax) continue;  // too little parallax to place it
-    Eigen::Matrix<double, 3, 2> A;
-    A << f, -g;
-    const Eigen::Vector2d lambda = (A.transpose() * A).ldlt().solve(A.transpose() * C);
+    const Eigen::Vector2d lambda = twoRayDepths(f, g, C);
     if (!lambda.allFinite() || !(lambda.x() > 0.5) || !(lambda.y() > 0.5) || lambda.x() > kMaxMetricRangeM) continue;
     // On the reference ray: the support cameras' matches are to the reference keypoint.
     const Eigen::Vector3d X = lambda.x() * f;
@@ -637,7 +641,6 @@ std::optional<Eigen::Vector3d> OnlineRigCalibrator::fitTranslation(int c, std::v
   rc.min_significance = kTranslationSignificance;
   rc.min_inliers = std::max(rc.min_inliers, kMinMetricInliers);
   const CameraRefinement fit = estimateCameraPose(pooled, T_cur, rc, &T_fit, groups);
-  s.translation_last_fit_mm = fit.status == CameraRefinement::Status::kApplied ? fit.translation_change_mm : 0.0;
   if (fit.status == CameraRefinement::Status::kTooFewInliers) {
     s.translation_status = "not enough metric evidence: " + fit.message + ": translation not updated";
     return std::nullopt;
@@ -653,7 +656,6 @@ std::optional<Eigen::Vector3d> OnlineRigCalibrator::fitTranslation(int c, std::v
   if (fit.translation_change_mm < kMinTranslationStepMm) {
     s.translation_status = "converged (fit " + fixed(fit.translation_change_mm, 2) + " mm, below the " +
                            fixed(kMinTranslationStepMm, 1) + " mm the metric evidence can tell from its own bias)";
-    s.translation_last_fit_mm = 0.0;
     return std::nullopt;
   }
   const Eigen::Vector3d t_given = relative(given_, c).translation();

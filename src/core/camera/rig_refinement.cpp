@@ -1034,7 +1034,6 @@ CameraRefinement estimateCameraPose(const std::vector<MetricMatch>& matches, con
     if (ldlt.info() == Eigen::Success && dt.norm() > 0) sig = std::sqrt(std::max(0.0, dt.dot(ldlt.solve(dt))));
   }
   out.translation_standard_error_mm = sig > 0 ? out.translation_change_mm / sig : INFINITY;
-  out.standard_error_deg = out.translation_standard_error_mm;  // not a rotation's: see translation_standard_error_mm
   std::ostringstream why;
   why.precision(4);
   if (!agree) {

@@ -124,7 +124,6 @@ struct CameraCalibrationState {
   Eigen::Vector3d translation_correction_mm = Eigen::Vector3d::Zero();  // applied, from the given, reference frame
   int translation_updates = 0;        // translation fits applied
   int metric_matches = 0;             // pooled metric matches of the last fit
-  double translation_last_fit_mm = 0.0;  // the last translation fit's change from the then current translation
   std::string translation_status;     // one line, as status
 };
 
