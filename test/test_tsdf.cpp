@@ -429,21 +429,75 @@ TEST(TsdfMap, CarveRegionsLeaveNoGhost) {
     return n;
   };
   const Eigen::AlignedBox3d region(Eigen::Vector3d(4, -3, -1), Eigen::Vector3d(10, 3, 3));
-  for (const bool carve : {false, true}) {
-    TsdfMap map{TsdfConfig()};
+  // Neither a carve region nor free-space carving; the region only; free-space
+  // carving only (every active block seen in front of the wall).
+  enum Mode { kNone, kRegion, kFreeSpace };
+  for (const Mode mode : {kNone, kRegion, kFreeSpace}) {
+    SCOPED_TRACE(mode);
+    TsdfConfig cfg;
+    cfg.free_space_carving = mode == kFreeSpace;
+    TsdfMap map{cfg};
     for (int i = 0; i < 8; ++i) map.integrate(with_car, cam, T_W_C, Eigen::Vector3d(0, 0, 0));
     const int before = nearCar(map);
     EXPECT_GT(before, 200) << "the parked car is in the map";
     std::vector<Eigen::AlignedBox3d> regions;
-    if (carve) regions.push_back(region);
-    for (int i = 0; i < 12; ++i) map.integrate(without, cam, T_W_C, Eigen::Vector3d(0, 0, 0), regions);
+    if (mode == kRegion) regions.push_back(region);
+    size_t carved = 0;
+    for (int i = 0; i < 12; ++i) carved += map.integrate(without, cam, T_W_C, Eigen::Vector3d(0, 0, 0), regions).blocks_carved;
     const int after = nearCar(map);
-    if (carve) {
-      EXPECT_EQ(after, 0) << "the car's voxels in front of the wall are carved free";
-    } else {
+    if (mode == kNone) {
       EXPECT_GT(after, before / 2) << "without carving the ghost stays";
+    } else {
+      EXPECT_EQ(after, 0) << "the car's voxels in front of the wall are carved free";
+    }
+    // The car's blocks are 0.4 m: those whose centre lies more than mu + half
+    // a diagonal (0.2 + 0.35 m) in front of the wall at x = 10, i.e. the car's
+    // body from x = 5 to 9.45, are the carved ones.
+    if (mode == kFreeSpace) {
+      EXPECT_GT(carved, 12u * 20u);
+    } else {
+      EXPECT_EQ(carved, 0u);
     }
   }
+}
+
+// Free-space carving keeps what is there: orbiting the objects (exact depth),
+// the blocks each view sees in front of the sphere, the box and the ground are
+// fused too, and the surface stays as complete as without carving, every
+// point away from the creases within half a voxel of the true surface.
+TEST(TsdfMap, FreeSpaceCarvingKeepsTheTrueSurfaces) {
+  const CameraModel cam = smallFisheye();
+  const Scene scene = objectsScene();
+  size_t counts[2];
+  for (const bool carving : {false, true}) {
+    SCOPED_TRACE(carving);
+    TsdfConfig cfg;
+    cfg.free_space_carving = carving;
+    TsdfMap map(cfg);
+    size_t carved = 0;
+    for (const auto& T : orbit()) {
+      carved += map.integrate(scene.render(cam, T), cam, T, Eigen::Vector3d(T.translation().x(), T.translation().y(), 0))
+                    .blocks_carved;
+    }
+    TsdfMesher mesher(cfg.min_observations);
+    mesher.rebuild(map);
+    size_t off = 0;
+    const auto cloud = mesher.surfaceCloud();
+    for (const auto& p : cloud) {
+      const Eigen::Vector3d q(p.x, p.y, p.z);
+      off += std::abs(scene.sdf(q)) > 0.5 * cfg.voxel_size && !nearCrease(scene, q, cfg.voxel_size);
+    }
+    counts[carving] = cloud.size();
+    EXPECT_EQ(off, 0u);
+    if (carving) {
+      EXPECT_GT(carved, 0u) << "blocks seen in front of the surfaces from the other side of the orbit";
+    } else {
+      EXPECT_EQ(carved, 0u);
+    }
+  }
+  EXPECT_GT(counts[0], 10000u);
+  EXPECT_GE(counts[1], counts[0] * 0.99) << "carving must not eat the true surfaces";
+  EXPECT_LE(counts[1], counts[0] * 1.01);
 }
 
 // Drive past walls along x: ground and two facades at y = +-6 m.

@@ -328,7 +328,7 @@ int main(int argc, char** argv) {
     const int ref_slot = depth_src == "gt" ? 0 : ref;
     // timings.csv is written (checked) at the end.
     std::ostringstream csv;
-    csv << "stamp,sweep_ms,detect_ms,mask_ms,fuse_ms,total_ms,valid_pixels,masked_pixels\n";
+    csv << "stamp,sweep_ms,detect_ms,mask_ms,fuse_ms,total_ms,valid_pixels,masked_pixels,blocks_fused,blocks_carved\n";
     // Each detected vehicle's motion decision, with the truth where the bag
     // has the moving vehicles' true boxes (IoU >= 0.3 with one: moving).
     std::ostringstream vehicles_csv;
@@ -413,7 +413,8 @@ int main(int argc, char** argv) {
       t_sweep.push_back(sweep_ms), t_det.push_back(det_ms), t_mask.push_back(mask_ms), t_fuse.push_back(fuse_ms),
           t_total.push_back(total);
       csv << std::fixed << stamp.toSec() << "," << sweep_ms << "," << det_ms << "," << mask_ms << "," << fuse_ms << ","
-          << total << "," << st.valid_pixels << "," << cv::countNonZero(mask) << "\n";
+          << total << "," << st.valid_pixels << "," << cv::countNonZero(mask) << "," << st.blocks_touched << ","
+          << st.blocks_carved << "\n";
       ++processed;
       if (!quiet) {
         const double el = std::chrono::duration<double>(Clock::now() - run_start).count();

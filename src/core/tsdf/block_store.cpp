@@ -245,6 +245,13 @@ std::vector<BlockIndex> BlockStore::allBlocks() const {
   return out;
 }
 
+std::vector<BlockIndex> BlockStore::activeBlocks() const {
+  std::vector<BlockIndex> out;
+  out.reserve(active_.size());
+  for (const auto& kv : active_) out.push_back(kv.first);
+  return out;
+}
+
 BlockSet BlockStore::takeChangedBlocks() {
   BlockSet out;
   out.swap(changed_);

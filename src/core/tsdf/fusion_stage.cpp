@@ -76,6 +76,7 @@ TsdfFusionStage::Fused TsdfFusionStage::fuse(const cv::Mat& depth, const CameraM
   }
   out.with_intensity = !grey.empty();
   frames_with_intensity_ += out.with_intensity;
+  blocks_carved_ += out.stats.blocks_carved;
   last_T_W_B_ = T_W_B;
   last_stamp_ns_ = stamp_ns;
   ++frames_fused_;
@@ -178,6 +179,7 @@ std::vector<std::pair<std::string, std::string>> TsdfFusionStage::report(std::ve
       {"max_range (m)", num(live_.max_range)},
       {"min_observations", std::to_string(live_.min_observations)},
       {"frames fused with intensity", std::to_string(frames_with_intensity_)},
+      {"blocks fused in front of the surface (free_space_carving)", std::to_string(blocks_carved_)},
       {"occupancy cells occupied / free / unknown", std::to_string(occupancy_cells_[0]) + " / " +
                                                         std::to_string(occupancy_cells_[1]) + " / " +
                                                         std::to_string(occupancy_cells_[2])},

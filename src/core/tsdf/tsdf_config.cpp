@@ -63,6 +63,9 @@ const ParamTable<TsdfConfig>& TsdfConfig::params() {
                 "voxels; vertices without one: height), height (blue low to red high), normal")
         .number("max_range", [](TsdfConfig& c) -> double& { return c.max_range; }, R::atLeast(0), "m",
                 "Depth beyond this range is not fused; 0: no limit (applies to the next frame)", kRun)
+        .flag("free_space_carving", [](TsdfConfig& c) -> bool& { return c.free_space_carving; },
+              "Fuse every block of the map a depth frame sees in front of its surface, so that free space seen "
+              "through earlier mistakes (unrepeatable depth, a missed vehicle) carves them away")
         .numbers("local_map_size", 3, R::above(0), "m",
                  [](const TsdfConfig& c) {
                    return std::vector<double>{c.local_map_size.x(), c.local_map_size.y(), c.local_map_size.z()};

@@ -168,6 +168,39 @@ IntegrationStats TsdfMap::integrate(const cv::Mat& depth, const CameraModel& cam
           if (store_->isActive(b) && store_->insideLocalMap(b)) touched.insert(b);
         }
   }
+  const FmCameraT<float> cam = camera.floatParams();
+  const Eigen::Isometry3d T_C_W_d = T_W_C.inverse();
+  float T_C_W[12];
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 4; ++c) T_C_W[4 * r + c] = static_cast<float>(T_C_W_d.matrix()(r, c));
+  }
+  // Free-space carving: the active blocks this frame sees wholly in front of
+  // its measured surface. A block's centre is projected; when the pixel's
+  // range exceeds the centre's by more than mu plus half the block's
+  // diagonal, no voxel of the block lies in the surface's band at that pixel,
+  // so no ray of this frame allocated it, yet its voxels see free space: the
+  // integration below gives them the free-space update, and a surface that
+  // earlier frames fused there by mistake is averaged away.
+  if (config_.free_space_carving) {
+    const float bs = static_cast<float>(config_.blockSize());
+    const float margin = mu + 0.5f * std::sqrt(3.0f) * bs;
+    for (const BlockIndex& b : store_->activeBlocks()) {
+      if (touched.count(b)) continue;
+      const float px = (static_cast<float>(b.x()) + 0.5f) * bs;
+      const float py = (static_cast<float>(b.y()) + 0.5f) * bs;
+      const float pz = (static_cast<float>(b.z()) + 0.5f) * bs;
+      const float x = T_C_W[0] * px + T_C_W[1] * py + T_C_W[2] * pz + T_C_W[3];
+      const float y = T_C_W[4] * px + T_C_W[5] * py + T_C_W[6] * pz + T_C_W[7];
+      const float z = T_C_W[8] * px + T_C_W[9] * py + T_C_W[10] * pz + T_C_W[11];
+      const int pixel = fm_tsdf_voxel_pixel(&cam, x, y, z);
+      if (pixel < 0) continue;
+      const float measured = d_ptr[pixel];  // NaN beyond max_range
+      if (measured > 0.0f && measured <= 1e30f && measured - std::sqrt(x * x + y * y + z * z) > margin) {
+        touched.insert(b);
+        ++stats.blocks_carved;
+      }
+    }
+  }
   stats.blocks_touched = touched.size();
   const BlockWork work = store_->allocate(touched, &stats.blocks_allocated, &stats.blocks_swapped_in);
 
@@ -175,12 +208,6 @@ IntegrationStats TsdfMap::integrate(const cv::Mat& depth, const CameraModel& cam
   const auto t_integrate = Clock::now();
 
   // 2. Integration of every voxel of the touched blocks.
-  const FmCameraT<float> cam = camera.floatParams();
-  const Eigen::Isometry3d T_C_W_d = T_W_C.inverse();
-  float T_C_W[12];
-  for (int r = 0; r < 3; ++r) {
-    for (int c = 0; c < 4; ++c) T_C_W[4 * r + c] = static_cast<float>(T_C_W_d.matrix()(r, c));
-  }
   std::vector<char> changed;
   const cv::Mat grey_c = grey.empty() || grey.isContinuous() ? grey : grey.clone();
   integrator_->integrate(work, depth_c, grey_c, cam, T_C_W, &changed);

@@ -124,6 +124,8 @@ class BlockStore {
   size_t memoryBytes() const;
   // Active blocks first, then swapped ones (hash order within each).
   std::vector<BlockIndex> allBlocks() const;
+  // The active blocks (hash order).
+  std::vector<BlockIndex> activeBlocks() const;
 
   // --- Changed blocks (for incremental meshing) -----------------------------
   void markChanged(const BlockIndex& index) { changed_.insert(index); }

@@ -135,7 +135,7 @@ class TsdfFusionStage {
   std::vector<Eigen::AlignedBox3d> carve_;
   std::int64_t carve_stamp_ns_ = 0;
   std::optional<Eigen::Isometry3d> last_T_W_B_;
-  size_t frames_fused_ = 0, frames_with_intensity_ = 0;
+  size_t frames_fused_ = 0, frames_with_intensity_ = 0, blocks_carved_ = 0;
   std::array<size_t, 3> occupancy_cells_{};  // occupied / free / unknown of the last grid
   bool mesh_reset_ = false, cloud_stale_ = false;
   std::chrono::steady_clock::time_point last_swap_log_{};  // failed swap writes are logged every 5 s at most

@@ -57,6 +57,12 @@ struct TsdfConfig {
   // Colour of the mesh (rviz markers, PLY export); parameter `colour`.
   MeshColoring colour = MeshColoring::kIntensity;
   double max_range = 0.0;          // depth beyond this many metres is not fused (0: no limit)
+  // Every active block a depth frame sees in front of its measured surface is
+  // fused too, not only those near it: what earlier frames fused there by
+  // mistake (unrepeatable depth, a vehicle the mask missed) is averaged away
+  // by the free space seen through it (TsdfMap::integrate). Off: on the
+  // evaluation's drives it does not pay (docs/tsdf.md#free-space-carving).
+  bool free_space_carving = false;
   // Active box around the vehicle (world axes): centre = vehicle + offset.
   Eigen::Vector3d local_map_size = Eigen::Vector3d(60.0, 60.0, 3.0);
   Eigen::Vector3d local_map_offset = Eigen::Vector3d(0.0, 0.0, 1.0);

@@ -41,7 +41,8 @@ namespace fisheye_mapping {
 
 struct IntegrationStats {
   size_t valid_pixels = 0;
-  size_t blocks_touched = 0;    // blocks the frame's rays crossed (inside the local box)
+  size_t blocks_touched = 0;    // blocks the frame fused (inside the local box), carved ones included
+  size_t blocks_carved = 0;     // of them, active blocks seen in front of the surface (free_space_carving)
   size_t blocks_allocated = 0;  // new blocks
   size_t blocks_swapped_in = 0;
   size_t blocks_swapped_out = 0;
@@ -79,6 +80,11 @@ class TsdfMap {
   // VehicleMotionTracker::ghostRegions). `grey`: the image the depth was
   // computed for (CV_8UC1, the camera's size), averaged into the intensity
   // of the voxels near the surface (tsdf_shared.h); empty: no intensity.
+  // With free_space_carving, the active blocks whose centre the camera sees
+  // in front of the measured surface (beyond the centre by more than the
+  // truncation plus half the block's diagonal) are fused too, whether or not
+  // a ray ends near them: their voxels take the free-space update, so that
+  // what no later frame confirms is carved away.
   // Throws std::invalid_argument (map untouched) for a wrong encoding or
   // size of either image, or a non-finite pose.
   IntegrationStats integrate(const cv::Mat& depth, const CameraModel& camera,
