@@ -307,22 +307,22 @@ TEST(TsdfUpdate, FuseFollowsTheRuleByHandAndLeavesTheRestAlone) {
   FmVoxel v{0.0f, 0.0f};
   unsigned char g = 0;
   // range 4.9 m, measured 5.0 m: eta 0.1, d 0.5; first grey is the value.
-  EXPECT_EQ(fm_tsdf_fuse(&v, &g, 5.0f, 4.9f, 200.0f, mu, max_w), 1);
+  EXPECT_EQ(fm_tsdf_fuse(&v, &g, 5.0f, 4.9f, 200.0f, mu, max_w, 1.0f), 1);
   EXPECT_NEAR(v.tsdf, 0.5f, 1e-5f);
   EXPECT_EQ(v.weight, 1.0f);
   EXPECT_EQ(g, 200);
   // eta -0.1 (in the band, behind): d -0.5, D = (0.5 - 0.5) / 2 = 0; grey (200 + 100) / 2.
-  EXPECT_EQ(fm_tsdf_fuse(&v, &g, 5.0f, 5.1f, 100.0f, mu, max_w), 1);
+  EXPECT_EQ(fm_tsdf_fuse(&v, &g, 5.0f, 5.1f, 100.0f, mu, max_w, 1.0f), 1);
   EXPECT_NEAR(v.tsdf, 0.0f, 1e-5f);
   EXPECT_EQ(v.weight, 2.0f);
   EXPECT_EQ(g, 150);
   // eta 1.0 (free space): d clamped to 1, D = 1/3; outside the band the grey is kept.
-  EXPECT_EQ(fm_tsdf_fuse(&v, &g, 6.0f, 5.0f, 0.0f, mu, max_w), 1);
+  EXPECT_EQ(fm_tsdf_fuse(&v, &g, 6.0f, 5.0f, 0.0f, mu, max_w, 1.0f), 1);
   EXPECT_NEAR(v.tsdf, 1.0f / 3.0f, 1e-5f);
   EXPECT_EQ(v.weight, 3.0f);
   EXPECT_EQ(g, 150);
   // No image (g < 0): the distance is fused, the grey kept; the weight stays at the cap.
-  EXPECT_EQ(fm_tsdf_fuse(&v, &g, 5.0f, 5.0f, -1.0f, mu, max_w), 1);
+  EXPECT_EQ(fm_tsdf_fuse(&v, &g, 5.0f, 5.0f, -1.0f, mu, max_w, 1.0f), 1);
   EXPECT_NEAR(v.tsdf, (3.0f / 3.0f + 0.0f) / 4.0f, 1e-5f);
   EXPECT_EQ(v.weight, 3.0f);
   EXPECT_EQ(g, 150);
@@ -331,15 +331,20 @@ TEST(TsdfUpdate, FuseFollowsTheRuleByHandAndLeavesTheRestAlone) {
   const float none[] = {4.7999f, std::numeric_limits<float>::quiet_NaN(), std::numeric_limits<float>::infinity(),
                         0.0f, -3.0f};
   for (float measured : none) {
-    EXPECT_EQ(fm_tsdf_fuse(&v, &g, measured, 5.0f, 10.0f, mu, max_w), 0) << measured;
+    EXPECT_EQ(fm_tsdf_fuse(&v, &g, measured, 5.0f, 10.0f, mu, max_w, 1.0f), 0) << measured;
     EXPECT_EQ(std::memcmp(&v, &before, sizeof(v)), 0) << measured;
     EXPECT_EQ(g, 150) << measured;
   }
   // Exactly -mu behind: fused as D = -1 (the rule's edge).
   FmVoxel e{0.0f, 0.0f};
   unsigned char ge = 0;
-  EXPECT_EQ(fm_tsdf_fuse(&e, &ge, 5.0f, 5.2f, 50.0f, 0.2f, max_w), 1);
+  EXPECT_EQ(fm_tsdf_fuse(&e, &ge, 5.0f, 5.2f, 50.0f, 0.2f, max_w, 1.0f), 1);
   EXPECT_NEAR(e.tsdf, -1.0f, 1e-4f);
+  // A frame of observation weight 0.25 in free space (d = 1):
+  // D = (1 * -1 + 0.25 * 1) / 1.25 = -0.6, w = 1.25.
+  EXPECT_EQ(fm_tsdf_fuse(&e, &ge, 6.0f, 5.0f, 50.0f, 0.2f, max_w, 0.25f), 1);
+  EXPECT_NEAR(e.tsdf, -0.6f, 1e-5f);
+  EXPECT_FLOAT_EQ(e.weight, 1.25f);
 }
 
 // fm_tsdf_voxel_pixel: the nearest pixel of a point's projection, by hand with

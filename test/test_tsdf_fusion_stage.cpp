@@ -121,6 +121,46 @@ TEST(TsdfFusionStage, ATimeResetKeepsTheMapUnlessAsked) {
   EXPECT_FALSE(s.takeMeshReset());
 }
 
+// observation_travel: a frame counts in proportion to its camera's travel
+// (or turn) since the previous frame, by hand; a camera standing still before
+// the wall adds (almost) no observations, so the wall stays out of the cloud
+// until the camera has moved, whatever the frame rate.
+TEST(TsdfFusionStage, FramesCountByTheCamerasTravel) {
+  Wall wall;
+  TsdfConfig cfg = smallMap();
+  cfg.min_observations = 3;
+  cfg.observation_travel = 2.0;
+  cfg.observation_turn = 10.0;
+  TsdfFusionStage s(cfg, TsdfStageOptions(), quiet());
+  // wall.camera(i) stands 0.1 i m along x.
+  EXPECT_FLOAT_EQ(s.observationWeight(wall.camera(0)), 1.0f) << "no previous frame";
+  EXPECT_FLOAT_EQ(wall.fuse(s, 0, 1 * kS).observation_weight, 1.0f);
+  EXPECT_FLOAT_EQ(s.observationWeight(wall.camera(10)), 0.5f) << "1 m of 2";
+  EXPECT_FLOAT_EQ(s.observationWeight(wall.camera(30)), 1.0f) << "3 m: capped at 1";
+  EXPECT_FLOAT_EQ(s.observationWeight(wall.camera(0)), kMinObservationWeight) << "standing still";
+  Eigen::Isometry3d turned = wall.camera(0);
+  turned.linear() = turned.linear() * Eigen::AngleAxisd(4.0 * M_PI / 180.0, Eigen::Vector3d::UnitY()).toRotationMatrix();
+  EXPECT_NEAR(s.observationWeight(turned), 0.4f, 1e-5) << "4 degrees of 10";
+  // Standing still: 1 + 19 x 0.01 observations, below min_observations 3.
+  for (int k = 1; k < 20; ++k) EXPECT_FLOAT_EQ(wall.fuse(s, 0, (1 + k) * kS).observation_weight, kMinObservationWeight);
+  const FmVoxel* v = s.map().voxel(Eigen::Vector3i(59, 0, 15));  // a voxel in front of the wall at x = 6 m
+  ASSERT_NE(v, nullptr);
+  EXPECT_NEAR(v->weight, 1.19f, 1e-4);
+  s.updateMesh();
+  EXPECT_EQ(s.mesher().surfaceCloud().size(), 0u) << "no surface from a camera standing still";
+  // Moving on 1 m a frame (0.5 each): four frames reach 1.19 + 2 = 3.19 >= 3.
+  for (int k = 1; k <= 4; ++k) EXPECT_FLOAT_EQ(wall.fuse(s, 10 * k, (30 + k) * kS).observation_weight, 0.5f);
+  s.updateMesh();
+  EXPECT_GT(s.mesher().surfaceCloud().size(), 1000u) << "the wall, once the camera has moved";
+  // Without observation_travel every frame counts 1: 3 frames from one place are enough.
+  TsdfConfig every = smallMap();
+  every.min_observations = 3;
+  TsdfFusionStage e(every, TsdfStageOptions(), quiet());
+  for (int k = 0; k < 3; ++k) EXPECT_FLOAT_EQ(wall.fuse(e, 0, (1 + k) * kS).observation_weight, 1.0f);
+  e.updateMesh();
+  EXPECT_GT(e.mesher().surfaceCloud().size(), 1000u);
+}
+
 TEST(TsdfFusionStage, TheGreyImageOfTheStampColoursTheWall) {
   Wall wall;
   TsdfFusionStage s(smallMap(), TsdfStageOptions(), quiet());

@@ -114,7 +114,7 @@ void printContents(const fm::TsdfMap& map, int min_observations) {
     if (!blk) continue;
     for (const auto& v : blk->voxels) {
       if (v.weight > 0) ++observed, weight_sum += v.weight;
-      if (v.weight >= min_observations) ++confirmed;
+      if (v.weight >= fm::minObservationWeight(min_observations)) ++confirmed;
     }
   }
   std::printf("blocks:            %zu (%.1f MB of voxels)\n", map.numBlocks(),

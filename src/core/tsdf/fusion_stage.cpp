@@ -1,5 +1,6 @@
 #include "fisheye_mapping/core/tsdf/fusion_stage.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <stdexcept>
@@ -31,6 +32,7 @@ bool TsdfFusionStage::checkTimeReset(std::int64_t stamp_ns, std::string* reason)
   if (ev.kind != StreamTimeline::Kind::kReset) return false;
   *reason = ev.reason;
   last_stamp_ns_ = 0;
+  last_T_W_C_.reset();
   if (options_.clear_map_on_time_reset) {
     map_.clear();
     resetMesh();
@@ -48,6 +50,16 @@ TsdfFusionStage::Admission TsdfFusionStage::admit(std::int64_t stamp_ns) {
     a.reason = "stamp " + std::to_string((last_stamp_ns_ - stamp_ns) * 1e-9) + " s older than the last fused frame";
   }
   return a;
+}
+
+float TsdfFusionStage::observationWeight(const Eigen::Isometry3d& T_W_C) const {
+  const TsdfConfig& c = map_.config();
+  if (!(c.observation_travel > 0.0) || !last_T_W_C_) return 1.0f;
+  const double travel = (T_W_C.translation() - last_T_W_C_->translation()).norm();
+  const double turn_deg =
+      Eigen::AngleAxisd(last_T_W_C_->linear().transpose() * T_W_C.linear()).angle() * 180.0 / M_PI;
+  const double w = std::max(travel / c.observation_travel, turn_deg / c.observation_turn);
+  return static_cast<float>(std::clamp(w, double(kMinObservationWeight), 1.0));
 }
 
 TsdfFusionStage::Fused TsdfFusionStage::fuse(const cv::Mat& depth, const CameraModel& camera,
@@ -68,7 +80,8 @@ TsdfFusionStage::Fused TsdfFusionStage::fuse(const cv::Mat& depth, const CameraM
   }
   std::vector<Eigen::AlignedBox3d> carve;
   if (!carve_.empty() && std::llabs(stamp_ns - carve_stamp_ns_) <= kCarveWithinNs) carve = carve_;
-  out.stats = map_.integrate(depth, camera, T_W_C, T_W_B.translation(), carve, grey);
+  out.observation_weight = observationWeight(T_W_C);
+  out.stats = map_.integrate(depth, camera, T_W_C, T_W_B.translation(), carve, grey, out.observation_weight);
   if (out.stats.blocks_lost && log_) {
     log_(true, "frame " + std::to_string(stamp_ns * 1e-9) + ": " + std::to_string(out.stats.blocks_lost) +
                    " swapped blocks could not be read back and are lost (" + std::to_string(map_.numLostBlocks()) +
@@ -77,7 +90,9 @@ TsdfFusionStage::Fused TsdfFusionStage::fuse(const cv::Mat& depth, const CameraM
   out.with_intensity = !grey.empty();
   frames_with_intensity_ += out.with_intensity;
   blocks_carved_ += out.stats.blocks_carved;
+  observations_ += out.observation_weight;
   last_T_W_B_ = T_W_B;
+  last_T_W_C_ = T_W_C;
   last_stamp_ns_ = stamp_ns;
   ++frames_fused_;
   session_.changed();
@@ -139,6 +154,7 @@ void TsdfFusionStage::clear() {
   map_.clear();
   resetMesh();
   last_stamp_ns_ = 0;
+  last_T_W_C_.reset();
   timeline_.reset();
   session_.changed();
 }
@@ -180,6 +196,7 @@ std::vector<std::pair<std::string, std::string>> TsdfFusionStage::report(std::ve
       {"min_observations", std::to_string(live_.min_observations)},
       {"frames fused with intensity", std::to_string(frames_with_intensity_)},
       {"blocks fused in front of the surface (free_space_carving)", std::to_string(blocks_carved_)},
+      {"observations fused (frames weighted by travel, observation_travel)", num(std::round(observations_ * 10) / 10)},
       {"occupancy cells occupied / free / unknown", std::to_string(occupancy_cells_[0]) + " / " +
                                                         std::to_string(occupancy_cells_[1]) + " / " +
                                                         std::to_string(occupancy_cells_[2])},

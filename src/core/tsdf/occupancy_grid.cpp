@@ -88,7 +88,7 @@ OccupancyGrid computeOccupancyGrid(TsdfMap& map, const Eigen::Vector3d& center_W
   // 1. Every zero crossing of the observed voxels above the grid, by cell.
   std::vector<std::vector<Crossing>> column(n);
   const double vs = map.config().voxel_size;
-  const float min_w = static_cast<float>(min_observations);
+  const float min_w = minObservationWeight(min_observations);
   const BlockStore& store = map.store();
   const double bs = map.config().blockSize();
   auto value = [&](const Eigen::Vector3i& gv, float* out) {

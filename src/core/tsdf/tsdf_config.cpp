@@ -66,6 +66,13 @@ const ParamTable<TsdfConfig>& TsdfConfig::params() {
         .flag("free_space_carving", [](TsdfConfig& c) -> bool& { return c.free_space_carving; },
               "Fuse every block of the map a depth frame sees in front of its surface, so that free space seen "
               "through earlier mistakes (unrepeatable depth, a missed vehicle) carves them away")
+        .number("observation_travel", [](TsdfConfig& c) -> double& { return c.observation_travel; }, R::atLeast(0),
+                "m",
+                "A frame counts as min(1, camera travel since the previous frame / observation_travel) observations "
+                "(or its turn / observation_turn, if more; at least 0.01), so that min_observations means the same "
+                "at any frame rate and standing still adds nothing; 0: every frame counts 1")
+        .number("observation_turn", [](TsdfConfig& c) -> double& { return c.observation_turn; }, R::above(0), "deg",
+                "Camera turn since the previous frame that counts as a full observation (with observation_travel)")
         .numbers("local_map_size", 3, R::above(0), "m",
                  [](const TsdfConfig& c) {
                    return std::vector<double>{c.local_map_size.x(), c.local_map_size.y(), c.local_map_size.z()};

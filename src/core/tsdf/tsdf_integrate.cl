@@ -7,7 +7,7 @@ __kernel void integrate_blocks(__global struct FmVoxel* voxels, __global uchar* 
                                __global const int* block_coords, __global const float* depth,
                                __global const uchar* image, const int has_image, __global const struct FmCameraT* cam_in,
                                __global const float* pose, const float voxel_size, const float mu,
-                               const float max_weight, __global int* changed) {
+                               const float max_weight, const float obs_weight, __global int* changed) {
   const int gid = get_global_id(0);
   const int blk = gid / FM_BLOCK_VOXELS;
   const int l = gid - blk * FM_BLOCK_VOXELS;
@@ -23,7 +23,7 @@ __kernel void integrate_blocks(__global struct FmVoxel* voxels, __global uchar* 
   const float py = (block_coords[3 * blk + 1] * FM_BLOCK_SIDE + j + 0.5f) * voxel_size;
   const float pz = (block_coords[3 * blk + 2] * FM_BLOCK_SIDE + k + 0.5f) * voxel_size;
   __global const uchar* img = has_image ? image : (__global const uchar*)0;
-  if (fm_tsdf_integrate_voxel(&voxels[gid], &greys[gid], px, py, pz, &cam, T, depth, img, mu, max_weight)) {
+  if (fm_tsdf_integrate_voxel(&voxels[gid], &greys[gid], px, py, pz, &cam, T, depth, img, mu, max_weight, obs_weight)) {
     changed[blk] = 1;
   }
 }

@@ -24,7 +24,7 @@ void TsdfIntegratorCl::reserve(cl::Buffer* buffer, size_t* capacity, size_t byte
 
 void TsdfIntegratorCl::integrate(const BlockWork& blocks, const cv::Mat& depth, const cv::Mat& grey,
                                  const FmCameraT<float>& camera,
-                                 const float T_C_W[12], std::vector<char>* changed) {
+                                 const float T_C_W[12], float obs_weight, std::vector<char>* changed) {
   const size_t n = blocks.size();
   changed->assign(n, 0);
   if (n == 0) return;
@@ -67,7 +67,8 @@ void TsdfIntegratorCl::integrate(const BlockWork& blocks, const cv::Mat& depth, 
   kernel_.setArg(8, voxel_size_);
   kernel_.setArg(9, mu_);
   kernel_.setArg(10, max_weight_);
-  kernel_.setArg(11, changed_);
+  kernel_.setArg(11, obs_weight);
+  kernel_.setArg(12, changed_);
   q.enqueueNDRangeKernel(kernel_, cl::NullRange, cl::NDRange(n * FM_BLOCK_VOXELS), cl::NDRange(64));
   q.enqueueReadBuffer(voxels_, CL_FALSE, 0, voxel_bytes, staging_.data());
   q.enqueueReadBuffer(greys_, CL_FALSE, 0, grey_bytes, grey_staging_.data());

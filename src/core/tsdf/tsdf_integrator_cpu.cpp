@@ -63,7 +63,7 @@ TsdfIntegratorCpu::TsdfIntegratorCpu(const TsdfConfig& config)
 
 void TsdfIntegratorCpu::integrate(const BlockWork& blocks, const cv::Mat& depth_image, const cv::Mat& grey_image,
                                   const FmCameraT<float>& cam,
-                                  const float T_C_W[12], std::vector<char>* changed) {
+                                  const float T_C_W[12], float obs_weight, std::vector<char>* changed) {
   const float vs = voxel_size_;
   const float mu = mu_;
   const float max_w = max_weight_;
@@ -85,14 +85,14 @@ void TsdfIntegratorCpu::integrate(const BlockWork& blocks, const cv::Mat& depth_
       bool any;
 #ifdef FM_TSDF_HAVE_AVX2
       if (simd == SimdLevel::kAvx512) {
-        any = tsdf_avx512::integrateBlock(voxels, greys, origin, vs, cam, T_C_W, depth, image, mu, max_w, &scratch);
+        any = tsdf_avx512::integrateBlock(voxels, greys, origin, vs, cam, T_C_W, depth, image, mu, max_w, obs_weight, &scratch);
       } else if (simd == SimdLevel::kAvx2) {
-        any = tsdf_avx2::integrateBlock(voxels, greys, origin, vs, cam, T_C_W, depth, image, mu, max_w, &scratch);
+        any = tsdf_avx2::integrateBlock(voxels, greys, origin, vs, cam, T_C_W, depth, image, mu, max_w, obs_weight, &scratch);
       } else
 #endif
       {
         (void)simd;
-        any = tsdf_generic::integrateBlock(voxels, greys, origin, vs, cam, T_C_W, depth, image, mu, max_w, &scratch);
+        any = tsdf_generic::integrateBlock(voxels, greys, origin, vs, cam, T_C_W, depth, image, mu, max_w, obs_weight, &scratch);
       }
       (*changed)[n] = static_cast<char>(any);
     }

@@ -16,7 +16,7 @@ template <int MODEL>
 TSDF_INLINE bool integrateBlockT(FmVoxel* __restrict voxels, unsigned char* __restrict greys, const float origin[3],
                                  float vs, FmCameraT<float> cam, const float* __restrict T,
                                  const float* __restrict depth, const unsigned char* __restrict image, float mu,
-                                 float max_weight, BlockScratch* __restrict s) {
+                                 float max_weight, float a, BlockScratch* __restrict s) {
   cam.model = MODEL;
   const float ox = origin[0] + 0.5f, oy = origin[1] + 0.5f, oz = origin[2] + 0.5f;
   int seen = 0;
@@ -43,25 +43,25 @@ TSDF_INLINE bool integrateBlockT(FmVoxel* __restrict voxels, unsigned char* __re
   int any = 0;
 #pragma omp simd reduction(| : any)
   for (int l = 0; l < FM_BLOCK_VOXELS; ++l) {
-    any |= fm_tsdf_fuse(&voxels[l], &greys[l], s->measured[l], s->range[l], s->grey[l], mu, max_weight);
+    any |= fm_tsdf_fuse(&voxels[l], &greys[l], s->measured[l], s->range[l], s->grey[l], mu, max_weight, a);
   }
   return any != 0;
 }
 
 inline bool integrateBlock(FmVoxel* voxels, unsigned char* greys, const float origin[3], float vs,
                            const FmCameraT<float>& cam, const float* T, const float* depth,
-                           const unsigned char* image, float mu, float max_weight, BlockScratch* s) {
+                           const unsigned char* image, float mu, float max_weight, float a, BlockScratch* s) {
   switch (cam.model) {
     case FM_MODEL_UNIFIED:
-      return integrateBlockT<FM_MODEL_UNIFIED>(voxels, greys, origin, vs, cam, T, depth, image, mu, max_weight, s);
+      return integrateBlockT<FM_MODEL_UNIFIED>(voxels, greys, origin, vs, cam, T, depth, image, mu, max_weight, a, s);
     case FM_MODEL_PINHOLE:
-      return integrateBlockT<FM_MODEL_PINHOLE>(voxels, greys, origin, vs, cam, T, depth, image, mu, max_weight, s);
+      return integrateBlockT<FM_MODEL_PINHOLE>(voxels, greys, origin, vs, cam, T, depth, image, mu, max_weight, a, s);
     case FM_MODEL_DOUBLE_SPHERE:
-      return integrateBlockT<FM_MODEL_DOUBLE_SPHERE>(voxels, greys, origin, vs, cam, T, depth, image, mu, max_weight,
+      return integrateBlockT<FM_MODEL_DOUBLE_SPHERE>(voxels, greys, origin, vs, cam, T, depth, image, mu, max_weight, a,
                                                      s);
     case FM_MODEL_KANNALA_BRANDT:
       return integrateBlockT<FM_MODEL_KANNALA_BRANDT>(voxels, greys, origin, vs, cam, T, depth, image, mu,
-                                                      max_weight, s);
+                                                      max_weight, a, s);
     default:
       return false;
   }

@@ -56,7 +56,8 @@ const TsdfMap::RayTable& TsdfMap::raysFor(const CameraModel& camera) {
 
 IntegrationStats TsdfMap::integrate(const cv::Mat& depth, const CameraModel& camera,
                                     const Eigen::Isometry3d& T_W_C, const Eigen::Vector3d& vehicle_W,
-                                    const std::vector<Eigen::AlignedBox3d>& carve, const cv::Mat& grey) {
+                                    const std::vector<Eigen::AlignedBox3d>& carve, const cv::Mat& grey,
+                                    float observation_weight) {
   if (depth.type() != CV_32FC1) {
     throw std::invalid_argument("depth image must be 32FC1 (metres of range along the ray), got OpenCV type " +
                                 std::to_string(depth.type()));
@@ -79,6 +80,9 @@ IntegrationStats TsdfMap::integrate(const cv::Mat& depth, const CameraModel& cam
   }
   if (!T_W_C.matrix().allFinite() || !vehicle_W.allFinite()) {
     throw std::invalid_argument("camera pose or vehicle position is not finite");
+  }
+  if (!(observation_weight > 0.0f && observation_weight <= 1.0f)) {
+    throw std::invalid_argument("observation weight must be in (0, 1], got " + std::to_string(observation_weight));
   }
 
   IntegrationStats stats;
@@ -210,7 +214,7 @@ IntegrationStats TsdfMap::integrate(const cv::Mat& depth, const CameraModel& cam
   // 2. Integration of every voxel of the touched blocks.
   std::vector<char> changed;
   const cv::Mat grey_c = grey.empty() || grey.isContinuous() ? grey : grey.clone();
-  integrator_->integrate(work, depth_c, grey_c, cam, T_C_W, &changed);
+  integrator_->integrate(work, depth_c, grey_c, cam, T_C_W, observation_weight, &changed);
   for (size_t n = 0; n < work.size(); ++n) {
     if (changed[n]) store_->markChanged(work[n].first);
   }

@@ -253,7 +253,7 @@ BlockOutput TsdfMesher::computeBlock(const TsdfMap& map, const BlockIndex& index
     for (int dy = 0; dy < 2; ++dy)
       for (int dx = 0; dx < 2; ++dx) nb[dz][dy][dx] = map.store().find(index + BlockIndex(dx, dy, dz));
   if (!nb[0][0][0]) return out;
-  const float min_w = static_cast<float>(min_observations_);
+  const float min_w = minObservationWeight(min_observations_);
   auto at = [&](int i, int j, int k) -> float& { return val[i + N * (j + N * k)]; };
   auto gat = [&](int i, int j, int k) -> uint8_t& { return gval[i + N * (j + N * k)]; };
   for (int k = 0; k < N; ++k) {

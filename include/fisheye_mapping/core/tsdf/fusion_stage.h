@@ -68,7 +68,13 @@ class TsdfFusionStage {
     IntegrationStats stats;
     bool with_intensity = false;
     std::string intensity_note;  // why a grey image of the stamp was not used (else empty)
+    float observation_weight = 1;  // how much the frame counted (TsdfConfig::observation_travel)
   };
+  // The observation weight of a frame from camera pose T_W_C: 1 without
+  // observation_travel or a previous frame, else min(1, max(travel /
+  // observation_travel, turn / observation_turn)), at least
+  // kMinObservationWeight, travel and turn since the previous fused frame.
+  float observationWeight(const Eigen::Isometry3d& T_W_C) const;
   // Fuses one depth frame (TsdfMap::integrate; std::invalid_argument: map
   // untouched) with the grey image and carve regions of its stamp.
   Fused fuse(const cv::Mat& depth, const CameraModel& camera, const Eigen::Isometry3d& T_W_C,
@@ -135,6 +141,9 @@ class TsdfFusionStage {
   std::vector<Eigen::AlignedBox3d> carve_;
   std::int64_t carve_stamp_ns_ = 0;
   std::optional<Eigen::Isometry3d> last_T_W_B_;
+  // The previous fused frame's camera pose (observation weights).
+  std::optional<Eigen::Isometry3d> last_T_W_C_;
+  double observations_ = 0;  // the fused frames' observation weights, summed
   size_t frames_fused_ = 0, frames_with_intensity_ = 0, blocks_carved_ = 0;
   std::array<size_t, 3> occupancy_cells_{};  // occupied / free / unknown of the last grid
   bool mesh_reset_ = false, cloud_stale_ = false;

@@ -48,6 +48,13 @@ const char* toString(MeshColoring coloring);
 constexpr double kMaxVoxelSize = 10.0;          ///< m: voxel_size in (0, 10]
 constexpr double kMaxTruncationVoxels = 1000.0;  ///< truncation_voxels in (0, 1000]
 constexpr double kMaxMapWeight = 1e6;           ///< max_weight in (0, 1e6]
+constexpr float kMinObservationWeight = 0.01f;  ///< a frame's least observation weight (observation_travel)
+// The least weight a voxel needs to pass the observation rule: min_observations,
+// except that 1 (no filter) keeps every voxel observed at all, whatever the
+// frames' observation weights (observation_travel makes them fractional).
+inline float minObservationWeight(int min_observations) {
+  return min_observations <= 1 ? 1e-30f : static_cast<float>(min_observations);
+}
 
 struct TsdfConfig {
   double voxel_size = 0.05;        // metres
@@ -63,6 +70,16 @@ struct TsdfConfig {
   // by the free space seen through it (TsdfMap::integrate). Off: on the
   // evaluation's drives it does not pay (docs/tsdf.md#free-space-carving).
   bool free_space_carving = false;
+  // A frame counts as an observation in proportion to how far its camera
+  // moved since the previous frame: weight min(1, max(travel /
+  // observation_travel, turn / observation_turn)), at least
+  // kMinObservationWeight, towards each voxel's average and its observation
+  // count (min_observations). Neighbouring frames from nearly the same place
+  // repeat the same depth errors, so the observation rule then means the
+  // same at any frame rate, and a vehicle standing still adds no
+  // observations. 0: every frame counts 1 (TsdfFusionStage).
+  double observation_travel = 0.0;  // metres
+  double observation_turn = 10.0;   // degrees
   // Active box around the vehicle (world axes): centre = vehicle + offset.
   Eigen::Vector3d local_map_size = Eigen::Vector3d(60.0, 60.0, 3.0);
   Eigen::Vector3d local_map_offset = Eigen::Vector3d(0.0, 0.0, 1.0);

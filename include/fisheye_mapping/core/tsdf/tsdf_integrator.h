@@ -36,12 +36,14 @@ class TsdfIntegrator {
   //   camera: the depth map's camera model (float parameters).
   //   T_C_W: row-major 3x4 [R | t] from the world frame to the camera frame
   //          (metres).
+  //   obs_weight: the frame's observation weight, > 0 (fm_tsdf_fuse's a; 1: a
+  //          full observation).
   // Voxel centres are (global voxel index + 0.5) * voxel_size in the world
   // frame. Not thread-safe (one call at a time per integrator); the blocks'
   // storage must not be touched by anything else during the call. The CPU
   // backend uses config.threads threads (0: the OpenMP default).
   virtual void integrate(const BlockWork& blocks, const cv::Mat& depth, const cv::Mat& grey,
-                         const FmCameraT<float>& camera, const float T_C_W[12], std::vector<char>* changed) = 0;
+                         const FmCameraT<float>& camera, const float T_C_W[12], float obs_weight, std::vector<char>* changed) = 0;
 };
 
 // The backend config.integrator names. Throws std::invalid_argument for an

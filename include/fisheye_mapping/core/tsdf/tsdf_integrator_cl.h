@@ -23,7 +23,7 @@ class TsdfIntegratorCl : public TsdfIntegrator {
   const std::string& deviceName() const { return ctx_.deviceName(); }
 
   void integrate(const BlockWork& blocks, const cv::Mat& depth, const cv::Mat& grey, const FmCameraT<float>& camera,
-                 const float T_C_W[12], std::vector<char>* changed) override;
+                 const float T_C_W[12], float obs_weight, std::vector<char>* changed) override;
 
  private:
   void reserve(cl::Buffer* buffer, size_t* capacity, size_t bytes, cl_mem_flags flags);

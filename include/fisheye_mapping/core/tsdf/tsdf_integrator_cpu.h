@@ -20,7 +20,7 @@ class TsdfIntegratorCpu : public TsdfIntegrator {
   explicit TsdfIntegratorCpu(const TsdfConfig& config);
   TsdfIntegratorKind kind() const override { return TsdfIntegratorKind::kCpu; }
   void integrate(const BlockWork& blocks, const cv::Mat& depth, const cv::Mat& grey, const FmCameraT<float>& camera,
-                 const float T_C_W[12], std::vector<char>* changed) override;
+                 const float T_C_W[12], float obs_weight, std::vector<char>* changed) override;
 
  private:
   float voxel_size_, mu_, max_weight_;  // metres, metres, observations

@@ -85,11 +85,17 @@ class TsdfMap {
   // truncation plus half the block's diagonal) are fused too, whether or not
   // a ray ends near them: their voxels take the free-space update, so that
   // what no later frame confirms is carved away.
+  // `observation_weight` in (0, 1]: how much this frame counts, towards each
+  // voxel's weighted average and towards its observation count (1: a full
+  // observation; TsdfFusionStage lowers it for a camera that has hardly
+  // moved since the previous frame, see TsdfConfig::observation_travel).
   // Throws std::invalid_argument (map untouched) for a wrong encoding or
-  // size of either image, or a non-finite pose.
+  // size of either image, a non-finite pose, or an observation weight
+  // outside (0, 1].
   IntegrationStats integrate(const cv::Mat& depth, const CameraModel& camera,
                              const Eigen::Isometry3d& T_W_C, const Eigen::Vector3d& vehicle_W,
-                             const std::vector<Eigen::AlignedBox3d>& carve = {}, const cv::Mat& grey = cv::Mat());
+                             const std::vector<Eigen::AlignedBox3d>& carve = {}, const cv::Mat& grey = cv::Mat(),
+                             float observation_weight = 1.0f);
 
   // Moves the local map to the vehicle (world, metres): active blocks outside
   // the new box are swapped out, stored blocks inside it swapped back in.

@@ -95,13 +95,16 @@ FM_FN int fm_tsdf_voxel_pixel(const FM_CAM_FLOAT* cam, float x, float y, float z
 /* Fuses one pixel's measurement into a voxel: measured is the pixel's range
  * along its ray (NaN, inf or non-positive: none), range the voxel centre's
  * distance from the camera, g the pixel's grey value (0..255; negative: no
- * image). eta = measured - range is fused by fm_tsdf_update's rule, and a
- * voxel within the truncation band of the surface (|eta| <= mu) takes g into
- * *grey (fm_grey_update). The same arithmetic as those two, written with
- * selects and unconditional stores of the kept value, so that a loop over a
- * block's voxels vectorizes. Returns 1 if the voxel changed. */
+ * image), a > 0 the frame's observation weight (1: a full observation).
+ * eta = measured - range is fused by fm_tsdf_update's rule weighted by a:
+ * D <- (w D + a min(1, eta / mu)) / (w + a), w <- min(w + a, max_weight)
+ * (with a = 1 exactly fm_tsdf_update), and a voxel within the truncation
+ * band of the surface (|eta| <= mu) takes g into *grey (fm_grey_update). The
+ * same arithmetic as those two, written with selects and unconditional
+ * stores of the kept value, so that a loop over a block's voxels vectorizes.
+ * Returns 1 if the voxel changed. */
 FM_FN int fm_tsdf_fuse(FM_GLOBAL struct FmVoxel* v, FM_GLOBAL unsigned char* grey, float measured, float range,
-                       float g, float mu, float max_weight) {
+                       float g, float mu, float max_weight, float a) {
   const float eta = measured - range;
   /* a measurement (not NaN, inf or <= 0), and the voxel not behind the band */
   const int ok = (measured > 0.0f ? 1 : 0) & (measured <= 1e30f ? 1 : 0) & (eta >= -mu ? 1 : 0);
@@ -109,8 +112,8 @@ FM_FN int fm_tsdf_fuse(FM_GLOBAL struct FmVoxel* v, FM_GLOBAL unsigned char* gre
   d = d > 1.0f ? 1.0f : d;
   const float w = v->weight;
   const float t = v->tsdf;
-  const float t_new = (w * t + d) / (w + 1.0f);
-  const float w_new = (w + 1.0f < max_weight) ? w + 1.0f : max_weight;
+  const float t_new = (w * t + a * d) / (w + a);
+  const float w_new = (w + a < max_weight) ? w + a : max_weight;
   v->tsdf = ok ? t_new : t;
   v->weight = ok ? w_new : w;
   const int old_grey = (int)(*grey);
@@ -128,13 +131,14 @@ FM_FN int fm_tsdf_fuse(FM_GLOBAL struct FmVoxel* v, FM_GLOBAL unsigned char* gre
  * T_C_W is row-major 3x4 (rotation | translation) mapping world to camera.
  * depth: row-major, width x height metres of range along the ray, NaN invalid.
  * image: the same camera's grey image (width x height bytes, row-major), or
- * 0 (no intensity). fm_tsdf_voxel_pixel, then fm_tsdf_fuse (the OpenCL
+ * 0 (no intensity). a: the frame's observation weight (fm_tsdf_fuse).
+ * fm_tsdf_voxel_pixel, then fm_tsdf_fuse (the OpenCL
  * kernel's per-voxel work; the CPU integrator runs the same two functions in
  * vectorized loops over a block). */
 FM_FN int fm_tsdf_integrate_voxel(FM_GLOBAL struct FmVoxel* v, FM_GLOBAL unsigned char* grey, float px, float py,
                                   float pz, const FM_CAM_FLOAT* cam, const float* T_C_W,
                                   FM_GLOBAL const float* depth, FM_GLOBAL const unsigned char* image, float mu,
-                                  float max_weight) {
+                                  float max_weight, float a) {
   const float x = T_C_W[0] * px + T_C_W[1] * py + T_C_W[2] * pz + T_C_W[3];
   const float y = T_C_W[4] * px + T_C_W[5] * py + T_C_W[6] * pz + T_C_W[7];
   const float z = T_C_W[8] * px + T_C_W[9] * py + T_C_W[10] * pz + T_C_W[11];
@@ -143,7 +147,7 @@ FM_FN int fm_tsdf_integrate_voxel(FM_GLOBAL struct FmVoxel* v, FM_GLOBAL unsigne
     return 0;
   }
   const float g = image ? (float)image[pixel] : -1.0f;
-  return fm_tsdf_fuse(v, grey, depth[pixel], FM_SQRT(x * x + y * y + z * z), g, mu, max_weight);
+  return fm_tsdf_fuse(v, grey, depth[pixel], FM_SQRT(x * x + y * y + z * z), g, mu, max_weight, a);
 }
 
 #ifndef FM_OPENCL
