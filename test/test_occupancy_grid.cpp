@@ -230,3 +230,50 @@ TEST(OccupancyGrid, ScoresCountByHand) {
 }
 
 }  // namespace
+
+namespace {
+
+// The recall of what a camera could see, by hand: a 2 m thick wall (cells
+// x = 4, 5) across a 10 x 3 grid of 1 m cells, a viewpoint at x = 0.5 facing
+// it. Its near face (x = 4) is visible, its far face (x = 5) is not.
+TEST(OccupancyGrid, VisibleRecallCountsOnlyWhatTheCamerasCouldSee) {
+  fm::OccupancyGrid g;
+  g.resolution = 1.0;
+  g.width = 10, g.height = 3;
+  g.cells.assign(30, fm::OccupancyGrid::kUnknown);
+  g.cells[1 * 10 + 4] = fm::OccupancyGrid::kOccupied;  // the map found one near-face cell
+  g.cells[1 * 10 + 5] = fm::OccupancyGrid::kOccupied;  // and one of the far face
+  auto truth = [](double x, double) -> int8_t { return x > 4 && x < 6 ? 100 : 0; };
+  fm::OccupancyViewpoints views;
+  views.position = {Eigen::Vector2d(0.5, 1.5)};
+  views.heading = {Eigen::Vector2d(1, 0)};
+  std::vector<uint8_t> label;
+  fm::OccupancyScore s = fm::scoreOccupancy(g, truth, 0, nullptr, &views, &label);
+  EXPECT_EQ(s.true_boundary, 6u);  // both faces, three rows
+  EXPECT_EQ(s.boundary_found, 2u);
+  EXPECT_EQ(s.visible_boundary, 3u);  // the near face only
+  EXPECT_EQ(s.visible_found, 1u);
+  EXPECT_DOUBLE_EQ(s.visibleRecall(), 1.0 / 3.0);
+  EXPECT_DOUBLE_EQ(s.occupiedRecall(), 2.0 / 6.0);
+  ASSERT_EQ(label.size(), 30u);
+  EXPECT_EQ(label[1 * 10 + 4], fm::OccupancyScore::kBoundaryFound);
+  EXPECT_EQ(label[0 * 10 + 4], fm::OccupancyScore::kBoundaryMissed);
+  EXPECT_EQ(label[1 * 10 + 5], fm::OccupancyScore::kBoundaryFound);  // found, though hidden
+  EXPECT_EQ(label[0 * 10 + 5], fm::OccupancyScore::kBoundaryHidden);
+  EXPECT_EQ(label[1 * 10 + 2], 0);  // free
+  // Facing away, or out of range: nothing was visible.
+  views.heading = {Eigen::Vector2d(-1, 0)};
+  EXPECT_EQ(fm::scoreOccupancy(g, truth, 0, nullptr, &views).visible_boundary, 0u);
+  views.heading = {Eigen::Vector2d(1, 0)};
+  views.range = 3.0;
+  EXPECT_EQ(fm::scoreOccupancy(g, truth, 0, nullptr, &views).visible_boundary, 0u);
+  // A viewpoint on each side sees both faces.
+  views.range = 20.0;
+  views.position.push_back(Eigen::Vector2d(9.5, 1.5));
+  views.heading.push_back(Eigen::Vector2d(-1, 0));
+  s = fm::scoreOccupancy(g, truth, 0, nullptr, &views);
+  EXPECT_EQ(s.visible_boundary, 6u);
+  EXPECT_EQ(s.visible_found, 2u);
+}
+
+}  // namespace

@@ -27,6 +27,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "fisheye_mapping/Detection2DArray.h"
+#include "fisheye_mapping/core/tsdf/tsdf_map.h"
 
 namespace {
 
@@ -236,7 +237,7 @@ TEST(OfflineMapper, MapsADriveAndWritesTimings) {
             std::string::npos)
       << out;
   EXPECT_NE(out.find("offline_mapper: cloud.pcd not written: "), std::string::npos) << out;
-  EXPECT_NE(out.find("wrote " + kDir + "/map/cloud_all.pcd, self_calibration.csv, timings.csv, timings.md\n"),
+  EXPECT_NE(out.find("wrote " + kDir + "/map/cloud_all.pcd, map.fmtsdf, self_calibration.csv, timings.csv, timings.md\n"),
             std::string::npos)
       << out;
   EXPECT_NE(out.find("not written (earlier files of that name left as they were): mesh.ply, cloud.pcd\n"),
@@ -245,10 +246,15 @@ TEST(OfflineMapper, MapsADriveAndWritesTimings) {
   EXPECT_EQ(size(kDir + "/map/mesh.ply"), mesh_size);
   EXPECT_EQ(size(kDir + "/map/cloud.pcd"), cloud_size);
   EXPECT_EQ(lines(kDir + "/map/timings.csv"), 1 + 1);
-  EXPECT_NE(full_run.find("wrote " + kDir + "/map/mesh.ply, cloud.pcd, cloud_all.pcd, self_calibration.csv, "
-                                               "timings.csv, timings.md\n"),
+  EXPECT_NE(full_run.find("wrote " + kDir + "/map/mesh.ply, cloud.pcd, cloud_all.pcd, map.fmtsdf, "
+                                               "self_calibration.csv, timings.csv, timings.md\n"),
             std::string::npos)
       << full_run;
+  // The map file (as the nodelet's save_map) is the run's map: its geometry
+  // is the config's, and it holds blocks.
+  const fisheye_mapping::MapFileInfo info = fisheye_mapping::TsdfMap::readHeader(kDir + "/map/map.fmtsdf");
+  EXPECT_NEAR(info.voxel_size, 0.05, 1e-9);  // config/tsdf.yaml's voxel_size
+  EXPECT_GT(info.num_blocks, 10u);
   // The depth stage's online self-calibration (on by default): its time and
   // each supporting camera's state in timings.md, one CSV row per camera and
   // update (the small rig's exact calibration: nothing to correct, nothing

@@ -37,7 +37,8 @@ const char* kUsage =
     "usage: occupancy_eval MAP --png OUT.png [--world DRIVE/world.yaml] [--within M]\n"
     "                      [--center X,Y] [--size S] [--resolution R] [--min-observations N]\n"
     "  MAP     a TSDF map file (the nodelet's save_map / save_map_on_shutdown, offline_mapper's map.fmtsdf)\n"
-    "  --png   the grid as a picture: unknown grey, free white, occupied black (path in red with --world)\n"
+    "  --png   the grid as a picture: unknown grey, free white, occupied black; with --world the path red and\n"
+    "          the true obstacles' boundary cells the recall counts green (found), magenta (missed) or dark violet (hidden from the path)\n"
     "  --world make_drive's world.yaml: scores occupied / free cells against the world's truth\n"
     "  --within M  score cells within M metres of the ego path (default 20)\n"
     "  --center X,Y and --size S: the grid (default: the whole map or drive); --resolution R (default 0.2 m);\n"
@@ -106,6 +107,7 @@ int main(int argc, char** argv) {
 
     std::unique_ptr<fm::synth::World> world;
     std::vector<Eigen::Vector2d> path;
+    fm::OccupancyViewpoints views;  // the ego path, facing forward: the front rig
     if (!world_yaml.empty()) {
       const YAML::Node y = YAML::LoadFile(world_yaml);
       fm::synth::WorldConfig wc;
@@ -118,7 +120,13 @@ int main(int argc, char** argv) {
       wc.clouds = y["clouds"].as<double>();
       const double duration = y["duration"].as<double>();
       world = std::make_unique<fm::synth::World>(wc);
-      for (double t = 0; t <= duration + 1e-9; t += 0.1) path.push_back(world->egoPose(t).translation().head<2>());
+      views.range = within;
+      for (double t = 0; t <= duration + 1e-9; t += 0.1) {
+        const Eigen::Isometry3d T_W_B = world->egoPose(t);
+        path.push_back(T_W_B.translation().head<2>());
+        views.position.push_back(path.back());
+        views.heading.push_back(T_W_B.linear().col(0).head<2>().normalized());  // base_link x: forward
+      }
     }
     // The grid's square: given, or around the path, or around the map.
     if (!have_center || size <= 0) {
@@ -151,13 +159,7 @@ int main(int argc, char** argv) {
         const uint8_t c = v == fm::OccupancyGrid::kOccupied ? 0 : v == fm::OccupancyGrid::kFree ? 255 : 128;
         img.at<cv::Vec3b>(grid.height - 1 - y, x) = cv::Vec3b(c, c, c);
       }
-    for (const auto& p : path) {
-      int cx, cy;
-      if (grid.cellOf(p.x(), p.y(), &cx, &cy)) img.at<cv::Vec3b>(grid.height - 1 - cy, cx) = cv::Vec3b(0, 0, 255);
-    }
-    fm::writeImageFile(png, img);
-    std::printf("wrote %s\n", png.c_str());
-
+    std::vector<uint8_t> boundary;
     if (world) {
       auto near_path = [&](double x, double y) {
         for (const auto& p : path) {
@@ -167,12 +169,30 @@ int main(int argc, char** argv) {
       };
       const fm::OccupancyScore s = fm::scoreOccupancy(
           grid, [&](double x, double y) { return world->occupancyAt(x, y, gc.obstacle_height, gc.vehicle_height); }, 1,
-          near_path);
+          near_path, &views, &boundary);
       std::printf("within %.0f m of the path: occupied precision %.3f (%zu cells), recall %.3f (%zu boundary cells); "
                   "free precision %.3f (%zu cells), recall %.3f (%zu free cells)\n",
                   within, s.occupiedPrecision(), s.map_occupied, s.occupiedRecall(), s.true_boundary, s.freePrecision(),
                   s.map_free, s.freeRecall(), s.true_free);
+      std::printf("visible from the path (ahead, within %.0f m, line of sight): occupied recall %.3f (%zu of the %zu "
+                  "boundary cells)\n",
+                  views.range, s.visibleRecall(), s.visible_boundary, s.true_boundary);
     }
+    // The true obstacles' boundary the score counts: found green, missed
+    // magenta, hidden from the path dark violet.
+    for (size_t i = 0; i < boundary.size(); ++i) {
+      if (!boundary[i]) continue;
+      const int x = static_cast<int>(i % grid.width), y = static_cast<int>(i / grid.width);
+      img.at<cv::Vec3b>(grid.height - 1 - y, x) = boundary[i] == fm::OccupancyScore::kBoundaryFound    ? cv::Vec3b(0, 170, 0)
+                                                  : boundary[i] == fm::OccupancyScore::kBoundaryMissed ? cv::Vec3b(200, 0, 200)
+                                                                                                        : cv::Vec3b(110, 50, 90);
+    }
+    for (const auto& p : path) {
+      int cx, cy;
+      if (grid.cellOf(p.x(), p.y(), &cx, &cy)) img.at<cv::Vec3b>(grid.height - 1 - cy, cx) = cv::Vec3b(0, 0, 255);
+    }
+    fm::writeImageFile(png, img);
+    std::printf("wrote %s\n", png.c_str());
     return 0;
   } catch (const std::exception& e) {
     std::cerr << "occupancy_eval: " << e.what() << "\n";

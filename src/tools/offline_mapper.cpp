@@ -10,7 +10,8 @@
 // section's image_topics of --config, or --topic CAM=TOPIC.
 //
 // Writes DIR/mesh.ply, DIR/cloud.pcd, DIR/cloud_all.pcd (every voxel with a
-// surface, i.e. without the minimum-observation filter), DIR/timings.md (ms
+// surface, i.e. without the minimum-observation filter), DIR/map.fmtsdf (the
+// TSDF map, as the nodelet's save_map: map_tool, occupancy_eval), DIR/timings.md (ms
 // per stage), DIR/timings.csv (one row per frame set) and, with a detector,
 // DIR/vehicles.csv (each detected vehicle: moving, parked or undecided, its
 // speed and track, and whether the drive's true boxes say it moves), each under a
@@ -73,7 +74,7 @@ const char* kUsage =
     "  --bag B            the drive: camera images (raw or compressed), /tf, and for the\n"
     "                     oracles /<ref>/detections_gt and /<ref>/depth_gt\n"
     "  --camchain F, --mount F  the rig (Kalibr camchain and mount)\n"
-    "  --out DIR          mesh.ply, cloud.pcd, cloud_all.pcd, timings.md, timings.csv,\n"
+    "  --out DIR          mesh.ply, cloud.pcd, cloud_all.pcd, map.fmtsdf, timings.md, timings.csv,\n"
     "                     vehicles.csv (with a detector: each vehicle's motion decision)\n"
     "  --config YAML      sections sync, depth, detector, depth_mask, tsdf over the\n"
     "                     stage defaults (as vehicle.launch's config:=)\n"
@@ -533,7 +534,8 @@ int main(int argc, char** argv) {
                 mesher.saveMeshPly(p);
               }},
              {"cloud.pcd", [&](const std::string& p) { mesher.saveCloudPcd(p); }},
-             {"cloud_all.pcd", [&](const std::string& p) { mesher_all.saveCloudPcd(p); }}}) {
+             {"cloud_all.pcd", [&](const std::string& p) { mesher_all.saveCloudPcd(p); }},
+             {"map.fmtsdf", [&](const std::string& p) { mapper.map().save(p); }}}) {
       try {
         save(out + "/" + what);
         written.push_back(what);

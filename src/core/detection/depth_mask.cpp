@@ -36,6 +36,12 @@ const ParamTable<DepthMaskConfig>& DepthMaskConfig::params() {
               "Mask parked vehicles too (false: only moving vehicles and those not decided yet)")
         .number("moving_speed", [](C& c) -> double& { return c.motion.moving_speed; }, R::above(0), "m/s",
                 "A tracked vehicle this fast or faster moves; slower, it is parked")
+        .number("speed_significance", [](C& c) -> double& { return c.motion.speed_significance; }, R::atLeast(0),
+                "", "Standard errors a vehicle's measured speed must lie above (moving) or below (parked) moving_speed "
+                "to be decided; 0: the speed alone decides")
+        .number("position_noise", [](C& c) -> double& { return c.motion.position_noise; }, R::atLeast(0), "m",
+                "Scatter assumed of a vehicle's placed positions at 10 m or nearer, growing with the square of the range "
+                "(for the speed's standard error)")
         .number("decide_after", [](C& c) -> double& { return c.motion.decide_after; }, R::atLeast(0), "s",
                 "Time a vehicle is tracked before it is called moving or parked (masked until then)")
         .number("speed_window", [](C& c) -> double& { return c.motion.speed_window; }, R::above(0), "s",

@@ -49,6 +49,44 @@ double VehicleMotionTracker::Track::speed() const {
   return stt > 0.0 ? (stp / stt).norm() : std::numeric_limits<double>::quiet_NaN();
 }
 
+double VehicleMotionTracker::positionNoise(const Eigen::Vector3d& p_W, const Eigen::Isometry3d& T_W_C) const {
+  // Stereo depth error grows with the square of the range.
+  const double r = (p_W - T_W_C.translation()).norm() / 10.0;
+  return config_.position_noise * std::max(1.0, r * r);
+}
+
+double VehicleMotionTracker::Track::speedError() const {
+  const size_t n = history.size();
+  if (n < 2) return std::numeric_limits<double>::infinity();
+  double noise2 = 0.0;
+  for (double s : this->noise) noise2 += s * s;
+  const double noise = std::sqrt(noise2 / std::max<size_t>(1, this->noise.size()));
+  double mt = 0.0;
+  Eigen::Vector2d mp = Eigen::Vector2d::Zero();
+  for (const auto& h : history) {
+    mt += h.first;
+    mp += h.second.head<2>();
+  }
+  mt /= n;
+  mp /= double(n);
+  double stt = 0.0;
+  Eigen::Vector2d stp = Eigen::Vector2d::Zero();
+  for (const auto& h : history) {
+    stt += (h.first - mt) * (h.first - mt);
+    stp += (h.first - mt) * (h.second.head<2>() - mp);
+  }
+  if (!(stt > 0.0)) return std::numeric_limits<double>::infinity();
+  const Eigen::Vector2d v = stp / stt;
+  // Residual scatter per axis (two parameters per axis fitted).
+  double sigma = noise;
+  if (n > 2) {
+    double ss = 0.0;
+    for (const auto& h : history) ss += (h.second.head<2>() - mp - v * (h.first - mt)).squaredNorm();
+    sigma = std::max(noise, std::sqrt(ss / (2.0 * double(n - 2))));
+  }
+  return sigma / std::sqrt(stt);
+}
+
 std::vector<Eigen::AlignedBox3d> VehicleMotionTracker::ghostRegions() const {
   std::vector<Eigen::AlignedBox3d> out;
   for (const Ghost& g : ghosts_) out.push_back(g.region);
@@ -92,20 +130,32 @@ std::optional<Eigen::Vector3d> VehicleMotionTracker::place(const Detection& box,
   const size_t q = ranges.size() / 5;
   std::nth_element(ranges.begin(), ranges.begin() + q, ranges.end());
   const float limit = ranges[q] + 2.5f;
-  std::vector<double> xs, ys, zs;
+  // Along the camera's horizontal viewing direction the face toward the
+  // camera (the 20th percentile), across it and in height the median: the
+  // near face stays put while more of the flank comes into view as the ego
+  // drives up (the median slid forward with it).
+  Eigen::Vector3d fwd = T_W_C.linear().col(2);
+  fwd.z() = 0.0;
+  const bool level = fwd.norm() > 0.1;
+  fwd = level ? Eigen::Vector3d(fwd.normalized()) : Eigen::Vector3d::UnitX();
+  const Eigen::Vector3d side(-fwd.y(), fwd.x(), 0.0);
+  std::vector<double> as, ls, zs;
   for (const auto& p : pts) {
     if (p.first > limit) continue;
     const Eigen::Vector3d w = T_W_C * p.second;
-    xs.push_back(w.x());
-    ys.push_back(w.y());
+    as.push_back(fwd.dot(w));
+    ls.push_back(side.dot(w));
     zs.push_back(w.z());
   }
-  if (static_cast<int>(xs.size()) < config_.min_points) return std::nullopt;
-  auto median = [](std::vector<double>& v) {
-    std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-    return v[v.size() / 2];
+  if (static_cast<int>(as.size()) < config_.min_points) return std::nullopt;
+  auto quantile = [](std::vector<double>& v, double q) {
+    const size_t k = static_cast<size_t>(q * (v.size() - 1) + 0.5);
+    std::nth_element(v.begin(), v.begin() + k, v.end());
+    return v[k];
   };
-  return Eigen::Vector3d(median(xs), median(ys), median(zs));
+  const double a = quantile(as, level ? 0.2 : 0.5), l = quantile(ls, 0.5), z = quantile(zs, 0.5);
+  const Eigen::Vector3d xy = a * fwd + l * side;
+  return Eigen::Vector3d(xy.x(), xy.y(), z);
 }
 
 std::vector<VehicleMotionTracker::Decision> VehicleMotionTracker::update(
@@ -180,10 +230,18 @@ std::vector<VehicleMotionTracker::Decision> VehicleMotionTracker::update(
     out[i].track = tr.id;
     if (!cut[i]) {
       tr.history.emplace_back(stamp_s, *pos[i]);
-      while (tr.history.size() > 2 && stamp_s - tr.history[1].first >= config_.speed_window) tr.history.pop_front();
+      tr.noise.push_back(positionNoise(*pos[i], *T_W_C));
+      while (tr.history.size() > 2 && stamp_s - tr.history[1].first >= config_.speed_window) {
+        tr.history.pop_front();
+        tr.noise.pop_front();
+      }
       const double speed = tr.speed();
-      if (stamp_s - tr.first_seen + 1e-9 >= config_.decide_after && std::isfinite(speed)) {
-        if (speed >= config_.moving_speed) {
+      // Clear of the threshold by speed_significance standard errors.
+      const double margin = config_.speed_significance > 0.0
+                                ? config_.speed_significance * tr.speedError()
+                                : 0.0;
+      if (stamp_s - tr.first_seen + 1e-9 >= config_.decide_after && std::isfinite(speed) && std::isfinite(margin)) {
+        if (speed - margin >= config_.moving_speed) {
           if (tr.state == VehicleMotion::Parked && config_.carve_time > 0) {
             // Fused while parked, gone now: its region is carved.
             const Eigen::Vector3d h(config_.carve_half_size, config_.carve_half_size, 0.0);
@@ -194,9 +252,9 @@ std::vector<VehicleMotionTracker::Decision> VehicleMotionTracker::update(
             ghosts_.push_back(g);
           }
           tr.state = VehicleMotion::Moving;
-        } else if (tr.state != VehicleMotion::Moving) {
-          tr.state = VehicleMotion::Parked;
-          tr.parked_position = *pos[i];
+        } else if (tr.state != VehicleMotion::Moving && speed < config_.moving_speed) {
+          if (speed + margin < config_.moving_speed) tr.state = VehicleMotion::Parked;
+          if (tr.state == VehicleMotion::Parked) tr.parked_position = *pos[i];
         }
       }
     }
@@ -222,7 +280,10 @@ std::vector<VehicleMotionTracker::Decision> VehicleMotionTracker::update(
     tr.id = next_id_++;
     tr.first_seen = tr.last_seen = stamp_s;
     tr.last_position = *pos[i];
-    if (!cut[i]) tr.history.emplace_back(stamp_s, *pos[i]);
+    if (!cut[i]) {
+      tr.history.emplace_back(stamp_s, *pos[i]);
+      tr.noise.push_back(positionNoise(*pos[i], *T_W_C));
+    }
     tracks_.push_back(std::move(tr));
     out[i].track = tracks_.back().id;  // undecided: new
   }

@@ -214,14 +214,17 @@ OccupancyGrid computeOccupancyGrid(TsdfMap& map, const Eigen::Vector3d& center_W
 OccupancyScore& OccupancyScore::operator+=(const OccupancyScore& o) {
   map_occupied += o.map_occupied, occupied_right += o.occupied_right;
   true_boundary += o.true_boundary, boundary_found += o.boundary_found;
+  visible_boundary += o.visible_boundary, visible_found += o.visible_found;
   map_free += o.map_free, free_right += o.free_right;
   true_free += o.true_free, free_found += o.free_found;
   return *this;
 }
 
 OccupancyScore scoreOccupancy(const OccupancyGrid& grid, const std::function<int8_t(double, double)>& truth,
-                              int tolerance_cells, const std::function<bool(double, double)>& keep) {
+                              int tolerance_cells, const std::function<bool(double, double)>& keep,
+                              const OccupancyViewpoints* views, std::vector<uint8_t>* boundary) {
   const int w = grid.width, h = grid.height;
+  if (boundary) boundary->assign(static_cast<size_t>(w) * h, 0);
   std::vector<int8_t> t(static_cast<size_t>(w) * h);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
@@ -235,6 +238,27 @@ OccupancyScore scoreOccupancy(const OccupancyGrid& grid, const std::function<int
         const int a = x + dx, b = y + dy;
         if (a >= 0 && b >= 0 && a < w && b < h && v[static_cast<size_t>(b) * w + a] == what) return true;
       }
+    return false;
+  };
+  // A camera at a viewpoint sees the cell centre c: in range, in its field of
+  // view, and the line to it clear of true obstacles past c's neighbours.
+  const double cos_fov = views ? std::cos(views->half_fov) : 1.0;
+  auto visible = [&](const Eigen::Vector2d& c) {
+    for (size_t k = 0; k < views->position.size(); ++k) {
+      const Eigen::Vector2d d = views->position[k] - c;
+      const double len = d.norm();
+      if (!(len <= views->range) || len < 1e-9) continue;
+      if (-d.dot(views->heading[k]) < cos_fov * len) continue;
+      bool clear = true;
+      for (double step = 1.5 * grid.resolution; step < len && clear; step += 0.5 * grid.resolution) {
+        int cx, cy;
+        const Eigen::Vector2d p = c + d * (step / len);
+        if (grid.cellOf(p.x(), p.y(), &cx, &cy) && t[static_cast<size_t>(cy) * w + cx] == OccupancyGrid::kOccupied) {
+          clear = false;
+        }
+      }
+      if (clear) return true;
+    }
     return false;
   };
   OccupancyScore s;
@@ -254,7 +278,17 @@ OccupancyScore scoreOccupancy(const OccupancyGrid& grid, const std::function<int
       }
       if (tv == OccupancyGrid::kOccupied && near(t, x, y, OccupancyGrid::kFree, 1)) {
         ++s.true_boundary;
-        s.boundary_found += near(grid.cells, x, y, OccupancyGrid::kOccupied, tolerance_cells);
+        const bool found = near(grid.cells, x, y, OccupancyGrid::kOccupied, tolerance_cells);
+        s.boundary_found += found;
+        const bool seen = !views || visible(c);
+        if (views && seen) {
+          ++s.visible_boundary;
+          s.visible_found += found;
+        }
+        if (boundary) {
+          (*boundary)[i] = found ? OccupancyScore::kBoundaryFound
+                                 : seen ? OccupancyScore::kBoundaryMissed : OccupancyScore::kBoundaryHidden;
+        }
       }
       if (tv == OccupancyGrid::kFree) {
         ++s.true_free;

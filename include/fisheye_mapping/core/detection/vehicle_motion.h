@@ -12,7 +12,13 @@
 // seconds. Only vehicles within `decide_range` of the camera are measured
 // (farther, stereo depth is too coarse to tell a parked car from a slow one;
 // the map fuses nearer depth only). A vehicle is decided once tracked for
-// `decide_after` seconds: moving at `moving_speed` or faster, else parked.
+// `decide_after` seconds, and only when its measured speed is clear of
+// `moving_speed`: the speed's standard error (the positions' scatter about
+// the fitted line, at least `position_noise`, over the spread of their
+// stamps) times `speed_significance` must separate the speed from
+// moving_speed; moving above, parked below, undecided (masked) in between.
+// A few noisy positions at first sight (a parked car's first boxes placed a
+// metre apart) so no longer decide "moving" for good.
 // A vehicle once seen moving stays moving. A box cut by the image border
 // only shows part of its vehicle, a part that changes as the vehicle leaves
 // the view (a parked car passed by seems to move along with the ego), so it
@@ -52,6 +58,8 @@ const char* toString(VehicleMotion m);
 
 struct VehicleMotionConfig {
   double moving_speed = 2.5;   ///< m/s: a vehicle this fast or faster moves
+  double speed_significance = 2.0;  ///< standard errors the speed must lie from moving_speed to decide; 0: none
+  double position_noise = 0.15;     ///< m: the scatter of a vehicle's placed positions at 10 m (grows with range^2)
   double decide_after = 0.3;   ///< s a vehicle is tracked before it is decided
   double speed_window = 1.0;   ///< s of track history the speed is measured over
   double gate = 2.5;           ///< m a box may lie from its track's prediction
@@ -110,7 +118,14 @@ class VehicleMotionTracker {
     VehicleMotion state = VehicleMotion::Undecided;
     Eigen::Vector3d parked_position;   // the last one while parked
     double speed() const;
+    std::deque<double> noise;  // each history position's expected scatter (m)
+    // The speed's standard error: the positions' scatter about the fitted
+    // line (at least their expected scatter) over the root of the stamps' spread.
+    double speedError() const;
   };
+  // The expected scatter of a position placed at p_W from a camera at T_W_C:
+  // position_noise at 10 m or nearer, growing with the square of the range.
+  double positionNoise(const Eigen::Vector3d& p_W, const Eigen::Isometry3d& T_W_C) const;
   struct Ghost {
     Eigen::AlignedBox3d region;
     double until = 0.0;

@@ -69,28 +69,49 @@ struct OccupancyGrid {
 OccupancyGrid computeOccupancyGrid(TsdfMap& map, const Eigen::Vector3d& center_W, const OccupancyGridConfig& config,
                                    int min_observations);
 
+// Where the cameras looked from, for the recall of what they could see:
+// positions on the ground, unit headings, how far they see and the half
+// angle around the heading they cover (the front rig: a half plane).
+struct OccupancyViewpoints {
+  std::vector<Eigen::Vector2d> position, heading;
+  double range = 20.0;
+  double half_fov = 1.5707963267948966;
+};
+
 // Grid scores against a truth: truth(x, y) is what the world holds at a cell
 // centre (kOccupied, kFree, or kUnknown where it does not say: not scored).
 // A map-occupied cell counts as right when the truth has an obstacle within
 // `tolerance_cells` (Chebyshev); a true obstacle cell next to a true free cell
-// (the obstacles' boundary, what a camera can see) counts as found when the
-// map has an occupied cell within tolerance_cells. A map-free cell is right
-// when the truth is free there. `keep(x, y)`: the cells scored (e.g. within
-// 20 m of the path; the truth is asked only there); empty: all.
+// (the obstacles' boundary) counts as found when the map has an occupied cell
+// within tolerance_cells. A map-free cell is right when the truth is free
+// there. `keep(x, y)`: the cells scored (e.g. within 20 m of the path; the
+// truth is asked only there); empty: all.
+// With `views`, the boundary cells a camera could see are counted apart
+// (visible_boundary): some viewpoint within its range has the cell in its
+// field of view and the straight line to it meets no true obstacle beyond
+// the cell's own neighbours (1.5 cells); a building's back wall, a parked
+// car's far side or a facade behind it are not visible.
+// `boundary` (optional) receives, per cell, kBoundaryFound / kBoundaryMissed
+// (visible, or all when there are no views) / kBoundaryHidden for the true
+// boundary cells and 0 elsewhere (for pictures of what is missed).
 struct OccupancyScore {
+  static constexpr uint8_t kBoundaryFound = 1, kBoundaryMissed = 2, kBoundaryHidden = 3;
   size_t map_occupied = 0, occupied_right = 0;    // precision of occupied
-  size_t true_boundary = 0, boundary_found = 0;   // recall of occupied (boundary cells)
+  size_t true_boundary = 0, boundary_found = 0;   // recall of occupied (all boundary cells)
+  size_t visible_boundary = 0, visible_found = 0; // recall of occupied (the boundary cells a camera could see)
   size_t map_free = 0, free_right = 0;            // precision of free
   size_t true_free = 0, free_found = 0;           // recall of free
   double occupiedPrecision() const { return map_occupied ? double(occupied_right) / map_occupied : 0.0; }
   double occupiedRecall() const { return true_boundary ? double(boundary_found) / true_boundary : 0.0; }
+  double visibleRecall() const { return visible_boundary ? double(visible_found) / visible_boundary : 0.0; }
   double freePrecision() const { return map_free ? double(free_right) / map_free : 0.0; }
   double freeRecall() const { return true_free ? double(free_found) / true_free : 0.0; }
   OccupancyScore& operator+=(const OccupancyScore& o);
 };
 OccupancyScore scoreOccupancy(const OccupancyGrid& grid, const std::function<int8_t(double, double)>& truth,
                               int tolerance_cells = 1,
-                              const std::function<bool(double, double)>& keep = nullptr);
+                              const std::function<bool(double, double)>& keep = nullptr,
+                              const OccupancyViewpoints* views = nullptr, std::vector<uint8_t>* boundary = nullptr);
 
 }  // namespace fisheye_mapping
 
