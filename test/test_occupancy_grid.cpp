@@ -56,6 +56,15 @@ TEST(OccupancyGrid, CityDriveMatchesTheWorldsObstaclesAndRoad) {
   const fm::OccupancyGrid grid = fm::computeOccupancyGrid(map, world.egoPose(t_end / 2).translation(), gc, 3);
   ASSERT_EQ(grid.width, 200);
   ASSERT_EQ(grid.height, 200);
+  // The distance field comes with it (the default 5 m cap): 0 on obstacles.
+  ASSERT_EQ(grid.distance.size(), grid.cells.size());
+  for (size_t i = 0; i < grid.cells.size(); ++i) {
+    if (grid.cells[i] == fm::OccupancyGrid::kOccupied) {
+      ASSERT_EQ(grid.distance[i], 0.0f);
+    } else if (grid.cells[i] == fm::OccupancyGrid::kFree) {
+      ASSERT_GT(grid.distance[i], 0.0f);
+    }
+  }
   // The ground the grid found is the world's (z = 0) where it found one.
   size_t with_ground = 0, off = 0;
   for (float z : grid.ground) {
@@ -208,6 +217,11 @@ TEST(OccupancyGrid, BadParametersAreNamedAndRefused) {
   c = fm::OccupancyGridConfig();
   c.vehicle_height = 0.2;
   refused(c, "occupancy_vehicle_height");
+  c = fm::OccupancyGridConfig();
+  c.esdf_max_distance = -1;
+  refused(c, "esdf_max_distance");
+  c.esdf_max_distance = NAN;
+  refused(c, "esdf_max_distance");
 }
 
 TEST(OccupancyGrid, ScoresCountByHand) {
@@ -274,6 +288,41 @@ TEST(OccupancyGrid, VisibleRecallCountsOnlyWhatTheCamerasCouldSee) {
   s = fm::scoreOccupancy(g, truth, 0, nullptr, &views);
   EXPECT_EQ(s.visible_boundary, 6u);
   EXPECT_EQ(s.visible_found, 2u);
+}
+
+}  // namespace
+
+namespace {
+
+// The distance field by hand: one obstacle cell in a 20 x 20 grid of 0.2 m
+// cells, one unknown cell; distances are Euclidean between cell centres.
+TEST(OccupancyGrid, DistanceFieldIsTheDistanceToTheNearestObstacle) {
+  fm::OccupancyGrid g;
+  g.resolution = 0.2;
+  g.width = g.height = 20;
+  g.cells.assign(400, fm::OccupancyGrid::kFree);
+  g.cells[5 * 20 + 5] = fm::OccupancyGrid::kOccupied;
+  g.cells[0 * 20 + 19] = fm::OccupancyGrid::kUnknown;
+  fm::computeDistanceField(&g, 1.5);
+  ASSERT_EQ(g.distance.size(), 400u);
+  auto d = [&](int x, int y) { return g.distance[static_cast<size_t>(y) * 20 + x]; };
+  EXPECT_FLOAT_EQ(d(5, 5), 0.0f);
+  EXPECT_NEAR(d(6, 5), 0.2f, 1e-5);
+  EXPECT_NEAR(d(8, 9), 1.0f, 1e-5);                    // 3-4-5 cells
+  EXPECT_NEAR(d(7, 7), 0.2f * std::sqrt(8.0f), 1e-5);  // the diagonal, exact
+  EXPECT_FLOAT_EQ(d(19, 19), 1.5f);                    // 3.96 m away: the cap
+  EXPECT_TRUE(std::isnan(d(19, 0)));                   // unknown: no claim
+  // A second obstacle takes over where it is nearer.
+  g.cells[5 * 20 + 10] = fm::OccupancyGrid::kOccupied;
+  fm::computeDistanceField(&g, 1.5);
+  EXPECT_NEAR(d(9, 5), 0.2f, 1e-5);
+  EXPECT_NEAR(d(7, 5), 0.4f, 1e-5);
+  // No obstacle at all: the cap everywhere known; a zero cap: no field.
+  g.cells.assign(400, fm::OccupancyGrid::kFree);
+  fm::computeDistanceField(&g, 2.0);
+  EXPECT_FLOAT_EQ(d(3, 3), 2.0f);
+  fm::computeDistanceField(&g, 0.0);
+  EXPECT_TRUE(g.distance.empty());
 }
 
 }  // namespace

@@ -314,6 +314,32 @@ TEST_F(TsdfFusionNode, FusesFramesAndServesTheMap) {
   EXPECT_GE(on_object, occupied * 9 / 10);
   EXPECT_GT(free_cells, 500u);
 
+  // Its distance field (tsdf/esdf): a point per known cell, intensity its
+  // distance to the nearest occupied cell of the grid above (recomputed
+  // here by brute force from the grid message), at most 5 m.
+  sensor_msgs::PointCloud2ConstPtr esdf;
+  ros::Subscriber esdf_sub = nh_.subscribe<sensor_msgs::PointCloud2>(
+      "tsdf/esdf", 1, boost::function<void(const sensor_msgs::PointCloud2ConstPtr&)>([&esdf](const auto& m) { esdf = m; }));
+  ASSERT_TRUE(waitFor([&esdf] { return esdf != nullptr; }, 10.0)) << "no tsdf/esdf";
+  EXPECT_EQ(esdf->header.frame_id, "map");
+  pcl::PointCloud<pcl::PointXYZI> field;
+  pcl::fromROSMsg(*esdf, field);
+  EXPECT_EQ(field.size(), occupied + free_cells);
+  std::vector<Eigen::Vector2d> obstacles;
+  for (uint32_t y = 0; y < grid->info.height; ++y)
+    for (uint32_t x = 0; x < grid->info.width; ++x)
+      if (grid->data[y * grid->info.width + x] == 100)
+        obstacles.emplace_back(grid->info.origin.position.x + (x + 0.5) * grid->info.resolution,
+                               grid->info.origin.position.y + (y + 0.5) * grid->info.resolution);
+  size_t checked = 0, right = 0;
+  for (size_t k = 0; k < field.size(); k += 37) {  // a sample of the cells
+    double d = 5.0;
+    for (const auto& o : obstacles) d = std::min(d, (o - Eigen::Vector2d(field[k].x, field[k].y)).norm());
+    ++checked;
+    right += std::abs(field[k].intensity - d) < 1e-3;
+  }
+  EXPECT_EQ(right, checked) << "distances that differ from the brute-force ones";
+
   ASSERT_TRUE(last_mesh != nullptr);
   {
     std::lock_guard<std::mutex> lock(rviz.mutex);

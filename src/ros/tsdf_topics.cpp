@@ -1,5 +1,7 @@
 #include "fisheye_mapping/ros/tsdf_topics.h"
 
+#include <cmath>
+
 #include <nav_msgs/OccupancyGrid.h>
 #include <sensor_msgs/PointCloud2.h>
 #include <visualization_msgs/MarkerArray.h>
@@ -19,6 +21,7 @@ TsdfTopics::TsdfTopics(ros::NodeHandle& nh, const std::string& world_frame, Mesh
       "tsdf/cloud", 2, [this](const ros::SingleSubscriberPublisher&) { cloud_subscriber_came_ = true; },
       ros::SubscriberStatusCallback(), ros::VoidConstPtr(), true);
   occupancy_ = nh.advertise<nav_msgs::OccupancyGrid>("tsdf/occupancy", 1, true);
+  esdf_ = nh.advertise<sensor_msgs::PointCloud2>("tsdf/esdf", 1, true);
   done_ = nh.advertise<fisheye_mapping::FrameDone>("tsdf/fusion_done", 100);
 }
 
@@ -54,10 +57,30 @@ void TsdfTopics::sendAll(TsdfFusionStage& stage, const ros::SingleSubscriberPubl
 }
 
 void TsdfTopics::publishOccupancy(TsdfFusionStage& stage) {
-  if (occupancy_.getNumSubscribers() == 0) return;
+  const bool grid_wanted = occupancy_.getNumSubscribers() > 0, esdf_wanted = esdf_.getNumSubscribers() > 0;
+  if (!grid_wanted && !esdf_wanted) return;
   double z = 0;
   const std::optional<OccupancyGrid> grid = stage.occupancy(&z);
-  if (grid) occupancy_.publish(toOccupancyGridMsg(*grid, frame_, ros::Time().fromNSec(stage.lastStamp()), z));
+  if (!grid) return;
+  const ros::Time stamp = ros::Time().fromNSec(stage.lastStamp());
+  if (grid_wanted) occupancy_.publish(toOccupancyGridMsg(*grid, frame_, stamp, z));
+  if (!esdf_wanted || grid->distance.empty()) return;
+  // The distance field as voxblox's ESDF slice: a point per known cell on its
+  // local ground (the vehicle's height where there is none), intensity = m.
+  pcl::PointCloud<pcl::PointXYZI> cloud;
+  for (int y = 0; y < grid->height; ++y)
+    for (int x = 0; x < grid->width; ++x) {
+      const size_t i = static_cast<size_t>(y) * grid->width + x;
+      if (!std::isfinite(grid->distance[i])) continue;
+      const Eigen::Vector2d c = grid->cellCenter(x, y);
+      pcl::PointXYZI p;
+      p.x = static_cast<float>(c.x());
+      p.y = static_cast<float>(c.y());
+      p.z = std::isfinite(grid->ground[i]) ? grid->ground[i] : static_cast<float>(z);
+      p.intensity = grid->distance[i];
+      cloud.push_back(p);
+    }
+  esdf_.publish(toCloudMsg(cloud, frame_, stamp));
 }
 
 void TsdfTopics::frameDone(const std_msgs::Header& header, const std::string& skipped_because) {

@@ -10,6 +10,10 @@
 // each period (the store keeps the changed blocks for later).
 //   tsdf/occupancy  OccupancyGrid (latched) around the vehicle's last fused
 //                   pose, while someone subscribes;
+//   tsdf/esdf       PointCloud2 (latched, x y z intensity) of the same grid's
+//                   distance field: a point per known cell on its local
+//                   ground, intensity the distance (m) to the nearest
+//                   obstacle, while someone subscribes;
 //   tsdf/fusion_done  FrameDone for each depth frame, fused or skipped.
 // The caller holds the stage's lock around every call but the constructor
 // and frameDone().
@@ -45,7 +49,8 @@ class TsdfTopics {
   void publishReset(TsdfFusionStage& stage);
   // A late subscriber: pending changes to everyone first, then the whole mesh to it.
   void sendAll(TsdfFusionStage& stage, const ros::SingleSubscriberPublisher& subscriber);
-  // The obstacle grid, when someone subscribes and the stage has a pose.
+  // The obstacle grid and its distance field, when someone subscribes and
+  // the stage has a pose.
   void publishOccupancy(TsdfFusionStage& stage);
   // tsdf/fusion_done: this depth frame is finished with (for the paced
   // player), fused or skipped because of `skipped_because` (non-empty).
@@ -59,7 +64,7 @@ class TsdfTopics {
 
   std::string frame_;
   MeshMarkerStream markers_;
-  ros::Publisher mesh_, cloud_, occupancy_, done_;
+  ros::Publisher mesh_, cloud_, occupancy_, esdf_, done_;
   std::atomic<bool> cloud_subscriber_came_{false};  // a new tsdf/cloud subscriber waits for its first cloud
 };
 

@@ -6,6 +6,8 @@
 #include <stdexcept>
 #include <string>
 
+#include <opencv2/imgproc.hpp>
+
 #include "fisheye_mapping/core/common/param_table.h"
 #include "fisheye_mapping/core/tsdf/tsdf_map.h"
 
@@ -27,7 +29,9 @@ const ParamTable<OccupancyGridConfig>& OccupancyGridConfig::params() {
         .number("occupancy_ground_radius", [](C& c) -> double& { return c.ground_radius; }, R::aboveUpTo(0, 50),
                 "m", "The local ground of a cell pools the 1 m ground tiles within this radius")
         .number("occupancy_ground_quantile", [](C& c) -> double& { return c.ground_quantile; }, R::between(0, 1),
-                "", "Quantile of those tiles' heights taken as the local ground (low: roofs and walls do not lift it)");
+                "", "Quantile of those tiles' heights taken as the local ground (low: roofs and walls do not lift it)")
+        .number("esdf_max_distance", [](C& c) -> double& { return c.esdf_max_distance; }, R::between(0, 100), "m",
+                "Cap of the grid's distance field (tsdf/esdf: distance to the nearest obstacle); 0: none");
     t.rule([](const C& c) {
       const double cells = std::ceil(c.size / c.resolution);
       if (cells > 4000) {
@@ -208,7 +212,33 @@ OccupancyGrid computeOccupancyGrid(TsdfMap& map, const Eigen::Vector3d& center_W
     else if (v == OccupancyGrid::kFree) ++g.free;
     else ++g.unknown;
   }
+  computeDistanceField(&g, config.esdf_max_distance);
   return g;
+}
+
+void computeDistanceField(OccupancyGrid* grid, double max_distance) {
+  OccupancyGrid& g = *grid;
+  g.distance.clear();
+  if (!(max_distance > 0) || g.width <= 0 || g.height <= 0) return;
+  // distanceTransform: each non-zero pixel's distance to the nearest zero one.
+  cv::Mat src(g.height, g.width, CV_8UC1);
+  for (int y = 0; y < g.height; ++y)
+    for (int x = 0; x < g.width; ++x) src.at<uint8_t>(y, x) = g.at(x, y) == OccupancyGrid::kOccupied ? 0 : 255;
+  cv::Mat dist;
+  if (cv::countNonZero(src) < static_cast<int>(src.total())) {  // an obstacle to be near
+    cv::distanceTransform(src, dist, cv::DIST_L2, cv::DIST_MASK_PRECISE, CV_32F);
+  } else {
+    dist = cv::Mat(g.height, g.width, CV_32F, cv::Scalar(std::numeric_limits<float>::infinity()));
+  }
+  const float cap = static_cast<float>(max_distance);
+  g.distance.resize(g.cells.size());
+  for (int y = 0; y < g.height; ++y)
+    for (int x = 0; x < g.width; ++x) {
+      const size_t i = static_cast<size_t>(y) * g.width + x;
+      g.distance[i] = g.cells[i] == OccupancyGrid::kUnknown
+                          ? std::numeric_limits<float>::quiet_NaN()
+                          : std::min(cap, static_cast<float>(dist.at<float>(y, x) * g.resolution));
+    }
 }
 
 OccupancyScore& OccupancyScore::operator+=(const OccupancyScore& o) {

@@ -39,6 +39,7 @@ struct OccupancyGridConfig {
   double vehicle_height = 2.0;    // m above the local ground: higher surfaces are overhangs
   double ground_radius = 2.0;     // m, the tiles pooled into a cell's local ground
   double ground_quantile = 0.25;  // of those tiles' ground heights (low: a roof does not lift the ground)
+  double esdf_max_distance = 5.0; // m: the distance field's cap (OccupancyGrid::distance); 0: no field
   // Throws std::invalid_argument naming the parameter (params().check): also
   // for a grid of more than 4000 x 4000 cells, or vehicle_height not above
   // obstacle_height.
@@ -54,6 +55,12 @@ struct OccupancyGrid {
   Eigen::Vector2d origin = Eigen::Vector2d::Zero();  // world x, y of cell (0, 0)'s corner
   std::vector<int8_t> cells;                         // width * height, row-major (y rows)
   std::vector<float> ground;                         // local ground z per cell (world, m); NaN: none
+  // The distance field (a 2D ESDF, voxblox's on the grid): per cell the
+  // distance (m) from its centre to the nearest occupied cell's centre, 0 on
+  // obstacles, at most the cap (esdf_max_distance: no obstacle nearer); NaN
+  // at unknown cells. Distances are to the obstacles the map knows: an
+  // unknown cell nearer may hide one. Empty when esdf_max_distance is 0.
+  std::vector<float> distance;
   size_t occupied = 0, free = 0, unknown = 0;
 
   int8_t at(int x, int y) const { return cells[static_cast<size_t>(y) * width + x]; }
@@ -68,6 +75,11 @@ struct OccupancyGrid {
 // cells. Validates the config (std::invalid_argument naming the parameter).
 OccupancyGrid computeOccupancyGrid(TsdfMap& map, const Eigen::Vector3d& center_W, const OccupancyGridConfig& config,
                                    int min_observations);
+
+// Fills grid->distance (see OccupancyGrid) from its cells, capped at
+// max_distance (m); max_distance <= 0 leaves it empty. Exact Euclidean
+// distances (cv::distanceTransform, DIST_MASK_PRECISE).
+void computeDistanceField(OccupancyGrid* grid, double max_distance);
 
 // Where the cameras looked from, for the recall of what they could see:
 // positions on the ground, unit headings, how far they see and the half
