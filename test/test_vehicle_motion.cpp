@@ -314,3 +314,34 @@ TEST(VehicleMotion, UndecidedWithoutPoseOrDepthAndBadInputRefused) {
   EXPECT_EQ(message(r.depth, cam.width(), std::numeric_limits<double>::quiet_NaN()),
             "vehicle motion: the stamp is not finite");
 }
+
+// A parked car's track that suddenly gets a box 2 m away (a car driving past
+// taken for it, within the track's gate) does not call that box parked: it
+// is masked, and the vehicle is again parked once the box is back.
+TEST(VehicleMotion, ABoxAwayFromWhereAParkedCarStandsIsNotParked) {
+  const fm::CameraModel cam = camera();
+  fm::VehicleMotionTracker tracker;
+  std::vector<fm::VehicleMotionTracker::Decision> d;
+  for (int k = 0; k < 14; ++k) {
+    const double t = 0.1 * k;
+    const Eigen::Isometry3d T = cameraPose(2.0 * t);
+    const Render r = render(cam, T, k == 10 ? 14.0 : 12.0, 3.0);  // frame 10: 2 m farther on
+    d.push_back(tracker.update({r.box}, cam.width(), cam.height(), r.depth, cam, T, t)[0]);
+  }
+  EXPECT_EQ(d[9].motion, fm::VehicleMotion::Parked);
+  EXPECT_EQ(d[10].track, d[9].track) << "the 2 m jump is within the gate: same track";
+  EXPECT_EQ(d[10].motion, fm::VehicleMotion::Undecided) << "placed " << d[10].position.transpose();
+  EXPECT_EQ(d[13].motion, fm::VehicleMotion::Parked);
+  // With no tolerance for it (a huge parked_tolerance) the jump box is called parked.
+  fm::VehicleMotionConfig c;
+  c.parked_tolerance = 100.0;
+  fm::VehicleMotionTracker lenient(c);
+  fm::VehicleMotion at_jump = fm::VehicleMotion::Undecided;
+  for (int k = 0; k <= 10; ++k) {
+    const double t = 0.1 * k;
+    const Eigen::Isometry3d T = cameraPose(2.0 * t);
+    const Render r = render(cam, T, k == 10 ? 14.0 : 12.0, 3.0);
+    at_jump = lenient.update({r.box}, cam.width(), cam.height(), r.depth, cam, T, t)[0].motion;
+  }
+  EXPECT_EQ(at_jump, fm::VehicleMotion::Parked);
+}

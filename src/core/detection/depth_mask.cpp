@@ -42,6 +42,9 @@ const ParamTable<DepthMaskConfig>& DepthMaskConfig::params() {
         .number("position_noise", [](C& c) -> double& { return c.motion.position_noise; }, R::atLeast(0), "m",
                 "Scatter assumed of a vehicle's placed positions at 10 m or nearer, growing with the square of the range "
                 "(for the speed's standard error)")
+        .number("parked_tolerance", [](C& c) -> double& { return c.motion.parked_tolerance; }, R::atLeast(0), "m",
+                "A parked vehicle's box placed farther than this (plus twice its expected scatter) from where it "
+                "stands is masked, not fused as parked (a vehicle driving past taken for it, or driving off)")
         .number("decide_after", [](C& c) -> double& { return c.motion.decide_after; }, R::atLeast(0), "s",
                 "Time a vehicle is tracked before it is called moving or parked (masked until then)")
         .number("speed_window", [](C& c) -> double& { return c.motion.speed_window; }, R::above(0), "s",

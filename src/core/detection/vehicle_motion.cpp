@@ -228,9 +228,16 @@ std::vector<VehicleMotionTracker::Decision> VehicleMotionTracker::update(
     tr.last_seen = stamp_s;
     tr.last_position = *pos[i];
     out[i].track = tr.id;
+    // A parked vehicle stays where it is: a box of its track placed farther
+    // from where it stands than its scatter allows is another vehicle taken
+    // for it (one driving past) or it drives off. Not fused as parked.
+    const double noise_i = positionNoise(*pos[i], *T_W_C);
+    const bool off_parked =
+        !cut[i] && tr.state == VehicleMotion::Parked &&
+        (pos[i]->head<2>() - tr.parked_position.head<2>()).norm() > config_.parked_tolerance + 2.0 * noise_i;
     if (!cut[i]) {
       tr.history.emplace_back(stamp_s, *pos[i]);
-      tr.noise.push_back(positionNoise(*pos[i], *T_W_C));
+      tr.noise.push_back(noise_i);
       while (tr.history.size() > 2 && stamp_s - tr.history[1].first >= config_.speed_window) {
         tr.history.pop_front();
         tr.noise.pop_front();
@@ -254,12 +261,13 @@ std::vector<VehicleMotionTracker::Decision> VehicleMotionTracker::update(
           tr.state = VehicleMotion::Moving;
         } else if (tr.state != VehicleMotion::Moving && speed < config_.moving_speed) {
           if (speed + margin < config_.moving_speed) tr.state = VehicleMotion::Parked;
-          if (tr.state == VehicleMotion::Parked) tr.parked_position = *pos[i];
+          if (tr.state == VehicleMotion::Parked && !off_parked) tr.parked_position = *pos[i];
         }
       }
     }
     out[i].speed = tr.speed();
     out[i].motion = tr.state;  // a cut box keeps its track's decision
+    if (off_parked && tr.state == VehicleMotion::Parked) out[i].motion = VehicleMotion::Undecided;
   }
   for (const size_t i : unmatched) {
     // A second box on a vehicle tracked in this frame set: its decision.

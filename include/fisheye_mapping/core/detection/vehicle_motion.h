@@ -19,7 +19,10 @@
 // moving_speed; moving above, parked below, undecided (masked) in between.
 // A few noisy positions at first sight (a parked car's first boxes placed a
 // metre apart) so no longer decide "moving" for good.
-// A vehicle once seen moving stays moving. A box cut by the image border
+// A vehicle once seen moving stays moving. A box of a parked vehicle's
+// track placed more than `parked_tolerance` (plus twice its expected
+// scatter) from where the vehicle stands is undecided (masked), not parked:
+// another vehicle driving past taken for it, or the vehicle driving off. A box cut by the image border
 // only shows part of its vehicle, a part that changes as the vehicle leaves
 // the view (a parked car passed by seems to move along with the ego), so it
 // keeps its track's decision and position for the association but does not
@@ -60,6 +63,7 @@ struct VehicleMotionConfig {
   double moving_speed = 2.5;   ///< m/s: a vehicle this fast or faster moves
   double speed_significance = 2.0;  ///< standard errors the speed must lie from moving_speed to decide; 0: none
   double position_noise = 0.15;     ///< m: the scatter of a vehicle's placed positions at 10 m (grows with range^2)
+  double parked_tolerance = 1.0;    ///< m (plus twice the scatter): a parked vehicle's box placed farther from where it stands is not called parked
   double decide_after = 0.3;   ///< s a vehicle is tracked before it is decided
   double speed_window = 1.0;   ///< s of track history the speed is measured over
   double gate = 2.5;           ///< m a box may lie from its track's prediction
