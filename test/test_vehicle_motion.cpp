@@ -169,7 +169,9 @@ TEST(VehicleMotion, AParkedCarPassedByStaysParked) {
   // undecided at first, parked from 1 s on, never moving.
   for (int k = 1; k < 18; ++k) {
     EXPECT_NE(d[k].motion, fm::VehicleMotion::Moving) << "frame " << k << ": " << d[k].speed << " m/s";
-    if (k >= 5) EXPECT_EQ(d[k].motion, fm::VehicleMotion::Parked) << "frame " << k << ": " << d[k].speed << " m/s";
+    if (k >= 5) {
+      EXPECT_EQ(d[k].motion, fm::VehicleMotion::Parked) << "frame " << k << ": " << d[k].speed << " m/s";
+    }
     cut += d[k].track == d[0].track ? 0 : 1;
   }
   EXPECT_EQ(cut, 0) << "one track all along";

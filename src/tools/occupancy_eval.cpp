@@ -106,8 +106,8 @@ int main(int argc, char** argv) {
     map.load(map_path);
 
     std::unique_ptr<fm::synth::World> world;
-    std::vector<Eigen::Vector2d> path;
     fm::OccupancyViewpoints views;  // the ego path, facing forward: the front rig
+    const std::vector<Eigen::Vector2d>& path = views.position;
     if (!world_yaml.empty()) {
       const YAML::Node y = YAML::LoadFile(world_yaml);
       fm::synth::WorldConfig wc;
@@ -123,8 +123,7 @@ int main(int argc, char** argv) {
       views.range = within;
       for (double t = 0; t <= duration + 1e-9; t += 0.1) {
         const Eigen::Isometry3d T_W_B = world->egoPose(t);
-        path.push_back(T_W_B.translation().head<2>());
-        views.position.push_back(path.back());
+        views.position.push_back(T_W_B.translation().head<2>());
         views.heading.push_back(T_W_B.linear().col(0).head<2>().normalized());  // base_link x: forward
       }
     }

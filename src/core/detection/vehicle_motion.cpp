@@ -27,10 +27,9 @@ void VehicleMotionTracker::reset() {
   last_stamp_ = -std::numeric_limits<double>::infinity();
 }
 
-double VehicleMotionTracker::Track::speed() const {
-  if (history.size() < 2) return std::numeric_limits<double>::quiet_NaN();
-  const double dt = history.back().first - history.front().first;
-  if (!(dt > 0.0)) return std::numeric_limits<double>::quiet_NaN();
+bool VehicleMotionTracker::Track::fit(Eigen::Vector2d* velocity, double* stt, double* sigma) const {
+  const size_t n = history.size();
+  if (n < 2) return false;
   // Least-squares velocity of x(t), y(t): less noisy than the end points.
   double mt = 0.0;
   Eigen::Vector2d mp = Eigen::Vector2d::Zero();
@@ -38,15 +37,27 @@ double VehicleMotionTracker::Track::speed() const {
     mt += h.first;
     mp += h.second.head<2>();
   }
-  mt /= history.size();
-  mp /= double(history.size());
-  double stt = 0.0;
+  mt /= n;
+  mp /= double(n);
+  *stt = 0.0;
   Eigen::Vector2d stp = Eigen::Vector2d::Zero();
   for (const auto& h : history) {
-    stt += (h.first - mt) * (h.first - mt);
+    *stt += (h.first - mt) * (h.first - mt);
     stp += (h.first - mt) * (h.second.head<2>() - mp);
   }
-  return stt > 0.0 ? (stp / stt).norm() : std::numeric_limits<double>::quiet_NaN();
+  if (!(*stt > 0.0)) return false;
+  *velocity = stp / *stt;
+  // Residual scatter per axis (two parameters per axis fitted); 0 with two points.
+  double ss = 0.0;
+  for (const auto& h : history) ss += (h.second.head<2>() - mp - *velocity * (h.first - mt)).squaredNorm();
+  *sigma = n > 2 ? std::sqrt(ss / (2.0 * double(n - 2))) : 0.0;
+  return true;
+}
+
+double VehicleMotionTracker::Track::speed() const {
+  Eigen::Vector2d v;
+  double stt, sigma;
+  return fit(&v, &stt, &sigma) ? v.norm() : std::numeric_limits<double>::quiet_NaN();
 }
 
 double VehicleMotionTracker::positionNoise(const Eigen::Vector3d& p_W, const Eigen::Isometry3d& T_W_C) const {
@@ -56,35 +67,13 @@ double VehicleMotionTracker::positionNoise(const Eigen::Vector3d& p_W, const Eig
 }
 
 double VehicleMotionTracker::Track::speedError() const {
-  const size_t n = history.size();
-  if (n < 2) return std::numeric_limits<double>::infinity();
+  Eigen::Vector2d v;
+  double stt, sigma;
+  if (!fit(&v, &stt, &sigma)) return std::numeric_limits<double>::infinity();
   double noise2 = 0.0;
-  for (double s : this->noise) noise2 += s * s;
-  const double noise = std::sqrt(noise2 / std::max<size_t>(1, this->noise.size()));
-  double mt = 0.0;
-  Eigen::Vector2d mp = Eigen::Vector2d::Zero();
-  for (const auto& h : history) {
-    mt += h.first;
-    mp += h.second.head<2>();
-  }
-  mt /= n;
-  mp /= double(n);
-  double stt = 0.0;
-  Eigen::Vector2d stp = Eigen::Vector2d::Zero();
-  for (const auto& h : history) {
-    stt += (h.first - mt) * (h.first - mt);
-    stp += (h.first - mt) * (h.second.head<2>() - mp);
-  }
-  if (!(stt > 0.0)) return std::numeric_limits<double>::infinity();
-  const Eigen::Vector2d v = stp / stt;
-  // Residual scatter per axis (two parameters per axis fitted).
-  double sigma = noise;
-  if (n > 2) {
-    double ss = 0.0;
-    for (const auto& h : history) ss += (h.second.head<2>() - mp - v * (h.first - mt)).squaredNorm();
-    sigma = std::max(noise, std::sqrt(ss / (2.0 * double(n - 2))));
-  }
-  return sigma / std::sqrt(stt);
+  for (double s : noise) noise2 += s * s;
+  const double expected = std::sqrt(noise2 / std::max<size_t>(1, noise.size()));
+  return std::max(expected, sigma) / std::sqrt(stt);
 }
 
 std::vector<Eigen::AlignedBox3d> VehicleMotionTracker::ghostRegions() const {

@@ -121,6 +121,10 @@ class VehicleMotionTracker {
     double first_seen = 0.0;
     VehicleMotion state = VehicleMotion::Undecided;
     Eigen::Vector3d parked_position;   // the last one while parked
+    // The least-squares line through the history: velocity, the stamps'
+    // spread (sum of squared deviations) and the positions' scatter about it
+    // per axis (0 with two points); false with fewer than two stamps apart.
+    bool fit(Eigen::Vector2d* velocity, double* stt, double* sigma) const;
     double speed() const;
     std::deque<double> noise;  // each history position's expected scatter (m)
     // The speed's standard error: the positions' scatter about the fitted
