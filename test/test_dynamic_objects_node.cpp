@@ -438,8 +438,9 @@ TEST(DynamicObjects, DiagnosticsReconfigureAndCameraInfo) {
 // Issue 31: only what moves is masked. A static camera (tf map -> cam_street,
 // latched) sees a parked car and a car driving across at 10 m/s, 10 m ahead,
 // at 5 Hz; after the decision time the parked car's depth stays and the moving
-// one's goes, depth_masked/vehicles says which is which, and the diagnostics
-// say what is tracked. Without the transform every vehicle is masked and the
+// one's goes, depth_masked/vehicles says which is which, the parked car's
+// depth masked while it was undecided comes out on depth_masked/held with
+// those frames' stamps, and the diagnostics say what is tracked. Without the transform every vehicle is masked and the
 // diagnostics name the missing transform.
 TEST(DynamicObjects, OnlyMovingVehiclesAreMasked) {
   ros::NodeHandle nh;
@@ -475,6 +476,11 @@ TEST(DynamicObjects, OnlyMovingVehiclesAreMasked) {
         std::lock_guard<std::mutex> l(mu);
         vehicles[m->header.stamp.toNSec()] = m;
       });
+  std::map<uint64_t, sensor_msgs::ImageConstPtr> held;
+  auto s3 = nh.subscribe<sensor_msgs::Image>("depth_masked/held", 20, [&](const sensor_msgs::ImageConstPtr& m) {
+    std::lock_guard<std::mutex> l(mu);
+    held[m->header.stamp.toNSec()] = m;
+  });
   Diagnostics diag(nh);
   ros::AsyncSpinner spinner(1);
   spinner.start();
@@ -547,6 +553,33 @@ TEST(DynamicObjects, OnlyMovingVehiclesAreMasked) {
     EXPECT_NEAR(now.vehicles[1].speed, 10.0, 0.5);
   }
   EXPECT_NEAR(centreOf(last, 0), 10.0f, 1e-4) << "the parked car's depth stays";
+  {
+    // The frames in which the parked car was undecided (so masked) come out
+    // on depth_masked/held, each with its own stamp: the car's depth there,
+    // nothing of the moving car's.
+    std::lock_guard<std::mutex> l(mu);
+    std::vector<uint64_t> undecided;
+    for (const auto& [stamp, v] : vehicles) {
+      if (v->vehicles.size() == 2 && v->vehicles[0].motion == fisheye_mapping::TrackedVehicle::UNDECIDED) {
+        undecided.push_back(stamp);
+      }
+    }
+    ASSERT_FALSE(undecided.empty());
+    ASSERT_EQ(held.size(), undecided.size());
+    for (const uint64_t stamp : undecided) {
+      ASSERT_TRUE(held.count(stamp)) << "frame at " << stamp;
+      const cv::Mat h = cv_bridge::toCvShare(held[stamp])->image;
+      for (int i = 0; i < 2; ++i) {
+        const auto& d = vehicles[stamp]->vehicles[i].detection;
+        const int u = int((d.x_min + d.x_max) / 2), v = int((d.y_min + d.y_max) / 2);
+        const double rx = (u + 0.5 - W / 2.0) / f, ry = (v + 0.5 - H / 2.0) / f;
+        const float z = h.at<float>(v, u) / float(std::sqrt(rx * rx + ry * ry + 1.0));
+        if (i == 0) EXPECT_NEAR(z, 10.0f, 1e-4) << "the parked car's held depth";
+        if (i == 1) EXPECT_TRUE(std::isnan(z)) << "the moving car's is never held out";
+      }
+      EXPECT_EQ(held[stamp]->header.frame_id, "cam_street");
+    }
+  }
   EXPECT_TRUE(std::isnan(centreOf(last, 1))) << "the moving car's depth goes";
   Diagnostics::Status st;
   EXPECT_TRUE(diag.waitFor("depth_mask: depth_mask", [](const Diagnostics::Status& s) {

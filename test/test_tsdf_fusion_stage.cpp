@@ -181,6 +181,62 @@ TEST(TsdfFusionStage, TheGreyImageOfTheStampColoursTheWall) {
   EXPECT_EQ(s.map().grey(v), 200);
 }
 
+// Held depth (a vehicle masked while undecided, decided parked later): the
+// left half of frame 0 fused at once and the right half held, then fused
+// with frame 0's pose, weight and grey after frame 1, gives the map that
+// fusing frame 0 whole gives (the update is a weighted running mean, so
+// the order of two measurements of one voxel does not matter), and leaves
+// the time state as frame 1 left it. A stamp no fused frame had is refused.
+TEST(TsdfFusionStage, HeldDepthFusedLateIsFusedWithItsFramesPose) {
+  Wall wall;
+  TsdfConfig cfg = smallMap();
+  cfg.observation_travel = 2.0;
+  cfg.observation_turn = 10.0;
+  const cv::Mat grey(136, 256, CV_8UC1, cv::Scalar(120));
+  TsdfFusionStage whole(cfg, TsdfStageOptions(), quiet()), split(cfg, TsdfStageOptions(), quiet());
+  const cv::Mat d0 = wall.scene.render(wall.cam, wall.camera(0));
+  const cv::Mat d1 = wall.scene.render(wall.cam, wall.camera(10));
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  cv::Mat left = d0.clone(), right(d0.size(), CV_32FC1, cv::Scalar(nan));
+  left.colRange(128, 256).copyTo(right.colRange(128, 256));
+  left.colRange(128, 256).setTo(nan);
+  for (TsdfFusionStage* s : {&whole, &split}) s->addGrey(1 * kS, grey);
+  whole.fuse(d0, wall.cam, wall.camera(0), wall.base(0), 1 * kS);
+  whole.fuse(d1, wall.cam, wall.camera(10), wall.base(10), 2 * kS);
+  split.fuse(left, wall.cam, wall.camera(0), wall.base(0), 1 * kS);
+  const float w1 = split.fuse(d1, wall.cam, wall.camera(10), wall.base(10), 2 * kS).observation_weight;
+  EXPECT_FLOAT_EQ(w1, 0.5f);  // 1 m of 2
+  const auto held = split.fuseHeld(right, wall.cam, 1 * kS);
+  ASSERT_TRUE(held);
+  EXPECT_FLOAT_EQ(held->observation_weight, 1.0f) << "frame 0's weight, not one from frame 1's pose";
+  EXPECT_TRUE(held->with_intensity);
+  EXPECT_EQ(split.lastStamp(), 2 * kS);
+  EXPECT_EQ(split.framesFused(), 2u);
+  EXPECT_EQ(split.heldFramesFused(), 1u);
+  EXPECT_FLOAT_EQ(split.observationWeight(wall.camera(10)), kMinObservationWeight) << "still measured from frame 1";
+  ASSERT_EQ(split.map().numBlocks(), whole.map().numBlocks());
+  size_t compared = 0;
+  for (int y = -40; y <= 40; ++y) {
+    for (int z = 0; z <= 30; z += 3) {
+      const Eigen::Vector3i v(59, y, z);  // just in front of the wall's face
+      const FmVoxel* a = whole.map().voxel(v);
+      const FmVoxel* b = split.map().voxel(v);
+      ASSERT_EQ(a == nullptr, b == nullptr);
+      if (!a || a->weight <= 0) continue;
+      EXPECT_NEAR(a->tsdf, b->tsdf, 1e-4);
+      EXPECT_NEAR(a->weight, b->weight, 1e-4);
+      EXPECT_EQ(whole.map().grey(v), split.map().grey(v));
+      ++compared;
+    }
+  }
+  EXPECT_GT(compared, 200u);
+  // No fused frame of that stamp: nothing fused.
+  const size_t blocks = split.map().numBlocks();
+  EXPECT_FALSE(split.fuseHeld(d0, wall.cam, 3 * kS));
+  EXPECT_EQ(split.heldFramesFused(), 1u);
+  EXPECT_EQ(split.map().numBlocks(), blocks);
+}
+
 // The map's own memory on the report: its blocks (4608 bytes each: 512 voxels
 // of 8 bytes and 512 grey bytes) and its mesh's vertices, once meshed.
 TEST(TsdfFusionStage, TheReportCountsTheMapsOwnMemory) {

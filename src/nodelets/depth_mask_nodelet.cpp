@@ -9,7 +9,10 @@
 // - Each detected vehicle is placed in ~world_frame by the depth in its box
 //   and tracked (core VehicleMotionTracker): moving and undecided ones are
 //   masked (every box with ~mask_parked); the regions of parked vehicles that
-//   drove off go out on depth_masked/vehicles for the TSDF to carve.
+//   drove off go out on depth_masked/vehicles for the TSDF to carve. The
+//   depth an undecided vehicle masked is held (~hold_time, core
+//   VehicleDepthHold) and goes out on depth_masked/held, stamped with its
+//   frame set, once the vehicle is decided parked, for the TSDF to fuse.
 // - depth_masked/camera_info is the latest depth/camera_info with the masked
 //   depth's header (core InfoRelay: latched, and republished when it comes
 //   after a depth map); masking never waits for it.
@@ -37,6 +40,7 @@
 #include "fisheye_mapping/TrackedVehicleArray.h"
 #include "fisheye_mapping/core/depth/depth_image.h"
 #include "fisheye_mapping/core/detection/depth_mask.h"
+#include "fisheye_mapping/core/detection/held_depth.h"
 #include "fisheye_mapping/core/detection/mask_decisions.h"
 #include "fisheye_mapping/ros/camera_info.h"
 #include "fisheye_mapping/ros/camera_models.h"
@@ -74,15 +78,18 @@ class DepthMaskNodelet : public nodelet::Nodelet {
     monitor_->setInputExpected(false);
     pairer_ = std::make_unique<Pairer>(cfg_.wait_for_detections, std::size_t(cfg_.max_pending));
     tracker_ = std::make_unique<VehicleMotionTracker>(cfg_.motion);
+    hold_ = std::make_unique<VehicleDepthHold>(cfg_.mask_parked ? 0.0 : cfg_.hold_time);
     tf_buffer_ = std::make_unique<tf2_ros::Buffer>(ros::Duration(30.0));
     tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_, nh);
     vehicles_pub_ = nh.advertise<TrackedVehicleArray>("depth_masked/vehicles", 5);
+    held_pub_ = nh.advertise<sensor_msgs::Image>("depth_masked/held", 10);
     // A time reset clears the pairing (keyed on stamps) and the tracks; the
     // depth maps still waiting belong to the old timeline and are dropped.
     time_ = std::make_unique<StageTimeline>(
         *monitor_, log_, "depth mask", std::vector<std::string>{"depth", "detections"}, cfg_.time_reset_threshold,
         [this](const StreamTimeline::Event&, const std::string&) {
           tracker_->reset();
+          hold_->reset();
           const std::size_t dropped = pairer_->pendingDepth();
           for (std::size_t i = 0; i < dropped; ++i) monitor_->dropped("time reset (waiting depth maps)");
           pairer_ = std::make_unique<Pairer>(cfg_.wait_for_detections, std::size_t(cfg_.max_pending));
@@ -212,6 +219,8 @@ class DepthMaskNodelet : public nodelet::Nodelet {
       stat.add("vehicle motion", motion_state_);
       stat.add("vehicles moving / parked / undecided", counts_.text());
       stat.add("parked vehicles masked", cfg_.mask_parked ? "yes (mask_parked)" : "no");
+      stat.add("held depth (pixels now / frame sets released)",
+               std::to_string(hold_->heldPixels()) + " / " + std::to_string(hold_->releasedFrames()));
     }
     std::lock_guard<std::mutex> lock(info_mutex_);
     stat.add("camera_info", relay_->state("depth_masked/camera_info"));
@@ -261,12 +270,23 @@ class DepthMaskNodelet : public nodelet::Nodelet {
     }
     // Which vehicles move, from the depth before masking.
     const std::vector<VehicleMotionTracker::Decision> decisions = decide(header, depth, boxes, w, h);
+    // The depth undecided vehicles mask is held; that of the vehicles decided
+    // parked now goes out on depth_masked/held, stamped with its frame set.
+    std::vector<VehicleDepthHold::Frame> released;
+    if (!cfg_.mask_parked) {
+      released = hold_->update(std::int64_t(header.stamp.toNSec()), depth, boxes, decisions, float(cfg_.margin_px), w, h);
+    }
     const cv::Mat mask = maskDepthBoxes(depth, boxesToMask(boxes, decisions, cfg_.mask_parked), float(cfg_.margin_px), w, h);
     masked_pub_.publish(toDepthMsg(header, depth));
     mask_pub_.publish(toImageMsg(header, mask));  // mono8
     if (p.dets) {
       vehicles_pub_.publish(toTrackedVehicleArrayMsg(header, opts_.world_frame, w, h, **p.dets, decisions,
                                                      cfg_.mask_parked, tracker_->ghostRegions()));
+    }
+    for (const auto& f : released) {
+      std_msgs::Header held = header;
+      held.stamp.fromNSec(std::uint64_t(f.stamp_ns));
+      held_pub_.publish(toDepthMsg(held, f.depth));
     }
     if (colour_pub_.getNumSubscribers() > 0) {
       cv::Mat colour = colorizeDepth(depth, cfg_.colour_near, cfg_.colour_far);
@@ -315,9 +335,10 @@ class DepthMaskNodelet : public nodelet::Nodelet {
   DepthMaskNodeOptions opts_;
   NodeletLogger log_;
   std::unique_ptr<VehicleMotionTracker> tracker_;
+  std::unique_ptr<VehicleDepthHold> hold_;
   std::unique_ptr<tf2_ros::Buffer> tf_buffer_;
   std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
-  ros::Publisher vehicles_pub_;
+  ros::Publisher vehicles_pub_, held_pub_;
   CameraModelsByFrame cameras_;  // info_mutex_
   std::string motion_state_ = "no vehicle yet";
   MotionCounts counts_;

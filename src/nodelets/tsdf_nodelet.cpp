@@ -8,7 +8,10 @@
 //             (frames before their first CameraInfo wait for it: the last 8,
 //             2 s at most, ImagesWithModels; others are dropped, "no camera_info yet");
 //             image (the reference camera, for the map's intensity; ~intensity);
-//             depth_masked/vehicles (carve regions of parked vehicles that drove off).
+//             depth_masked/vehicles (carve regions of parked vehicles that drove off);
+//             depth_masked/held (32FC1: depth of vehicles decided parked, held back
+//             while undecided, stamped with an earlier fused frame: fused with
+//             that frame's pose, TsdfFusionStage::fuseHeld).
 // Publishes   tsdf/mesh (MarkerArray, changed blocks; a late subscriber gets all),
 //             tsdf/cloud (PointCloud2 x y z intensity), tsdf/occupancy (latched
 //             OccupancyGrid every ~occupancy_period s), tsdf/fusion_done (one
@@ -96,6 +99,7 @@ class TsdfNodelet : public nodelet::Nodelet {
       hold_timer_ = nh.createWallTimer(ros::WallDuration(0.25), [this](const ros::WallTimerEvent&) { images_->expire(); });
     }
     vehicles_sub_ = nh.subscribe("depth_masked/vehicles", 5, &TsdfNodelet::onVehicles, this);
+    held_sub_ = nh.subscribe("depth_masked/held", 10, &TsdfNodelet::onHeld, this);
     if (opts_.intensity) {
       it_ = std::make_unique<image_transport::ImageTransport>(nh);
       image_sub_ = it_->subscribe("image", 4, &TsdfNodelet::onImage, this);
@@ -218,6 +222,8 @@ class TsdfNodelet : public nodelet::Nodelet {
     stat.add("exceptions in timers", static_cast<size_t>(timer_errors_));
     stat.add("intensity images unreadable", static_cast<size_t>(image_errors_));
     stat.add("mesh blocks on screen", topics_->numShown());
+    stat.add("held depth frames fused / skipped",
+             std::to_string(stage_->heldFramesFused()) + " / " + std::to_string(static_cast<size_t>(held_skipped_)));
   }
 
   // Fuses one frame; every path acknowledges it (tsdf/fusion_done), saying why it was skipped.
@@ -278,10 +284,29 @@ class TsdfNodelet : public nodelet::Nodelet {
     } catch (const std::invalid_argument& e) {
       return skip("rejected by the map", e.what());
     }
+    last_model_ = model;
+    last_model_frame_ = frame;
     monitor_->processed(StageStats::now() - t0);
     monitor_->output();  // the stage's product: a frame in the map
     if (!f.intensity_note.empty()) NODELET_WARN_THROTTLE(5.0, "%s", f.intensity_note.c_str());
     return "";
+  }
+
+  // Held depth of vehicles decided parked (the depth mask stage's
+  // VehicleDepthHold): fused with the pose of the frame of its stamp, fused
+  // earlier; skipped (counted) when that frame is not among the last fused.
+  void onHeld(const ImagePtr& msg) {
+    const std::string error = guarded(depth_errors_, "held depth", [&] {
+      checkDepthImage(*msg, getNodeHandle().resolveName("depth_masked/held"));
+      const cv::Mat depth = toDepthShare(msg);
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (!last_model_ || last_model_frame_ != msg->header.frame_id) {
+        ++held_skipped_;
+        return;
+      }
+      if (!stage_->fuseHeld(depth, *last_model_, std::int64_t(msg->header.stamp.toNSec()))) ++held_skipped_;
+    });
+    if (!error.empty()) ++held_skipped_;  // logged and counted by guarded
   }
 
   // The reference camera's images, for the depth frames of their stamps.
@@ -341,7 +366,10 @@ class TsdfNodelet : public nodelet::Nodelet {
   std::unique_ptr<PosedImageInput> depth_in_;  // depth frames, each once its pose is in the tf buffer
   std::unique_ptr<image_transport::ImageTransport> it_;
   image_transport::Subscriber image_sub_;
-  ros::Subscriber info_sub_, vehicles_sub_;
+  ros::Subscriber info_sub_, vehicles_sub_, held_sub_;
+  std::shared_ptr<const CameraModel> last_model_;  // mutex_: the last fused frame's camera (held depth)
+  std::string last_model_frame_;                   // mutex_
+  std::atomic<size_t> held_skipped_{0};
   std::unique_ptr<FilePathServices> files_;
   ros::WallTimer timer_, autosave_timer_, occupancy_timer_, hold_timer_;
   std::unique_ptr<StageMonitor> monitor_;

@@ -34,6 +34,9 @@ const ParamTable<DepthMaskConfig>& DepthMaskConfig::params() {
                  "[near, far] of the colour scale of depth_masked/colour")
         .flag("mask_parked", [](C& c) -> bool& { return c.mask_parked; },
               "Mask parked vehicles too (false: only moving vehicles and those not decided yet)")
+        .number("hold_time", [](C& c) -> double& { return c.hold_time; }, R::atLeast(0), "s",
+                "Time an undecided vehicle's masked depth is held, to be fused (depth_masked/held) once the vehicle is "
+                "decided parked; 0: dropped")
         .number("moving_speed", [](C& c) -> double& { return c.motion.moving_speed; }, R::above(0), "m/s",
                 "A tracked vehicle this fast or faster moves; slower, it is parked")
         .number("speed_significance", [](C& c) -> double& { return c.motion.speed_significance; }, R::atLeast(0),
@@ -82,30 +85,30 @@ DepthMaskConfig DepthMaskConfig::fromParams(const ParamSource& p, DepthMaskConfi
   return params().read(p, std::move(base));
 }
 
+cv::Rect maskedRect(const Detection& b, float margin_px, cv::Size depth_size, int image_w, int image_h) {
+  if (!std::isfinite(b.x_min) || !std::isfinite(b.y_min) || !std::isfinite(b.x_max) || !std::isfinite(b.y_max))
+    return cv::Rect();
+  const float sx = float(depth_size.width) / image_w, sy = float(depth_size.height) / image_h;
+  // Pixel u is inside when its centre u + 0.5 lies in [x_min - m, x_max + m] (depth pixels).
+  const int u0 = std::max(0, int(std::ceil((b.x_min - margin_px) * sx - 0.5f)));
+  const int u1 = std::min(depth_size.width - 1, int(std::floor((b.x_max + margin_px) * sx - 0.5f)));
+  const int v0 = std::max(0, int(std::ceil((b.y_min - margin_px) * sy - 0.5f)));
+  const int v1 = std::min(depth_size.height - 1, int(std::floor((b.y_max + margin_px) * sy - 0.5f)));
+  if (u1 < u0 || v1 < v0) return cv::Rect();
+  return cv::Rect(u0, v0, u1 - u0 + 1, v1 - v0 + 1);
+}
+
 cv::Mat maskDepthBoxes(cv::Mat& depth, const std::vector<Detection>& boxes, float margin_px, int image_w,
                        int image_h) {
   if (depth.type() != CV_32FC1) throw std::invalid_argument("maskDepthBoxes: depth must be 32FC1");
   if (image_w <= 0 || image_h <= 0) throw std::invalid_argument("maskDepthBoxes: detection image size must be positive");
   if (!(margin_px >= 0.f)) throw std::invalid_argument("maskDepthBoxes: margin must be >= 0");
   cv::Mat mask(depth.size(), CV_8UC1, cv::Scalar(0));
-  const float sx = float(depth.cols) / image_w, sy = float(depth.rows) / image_h;
-  const float nan = std::numeric_limits<float>::quiet_NaN();
   for (const auto& b : boxes) {
-    if (!std::isfinite(b.x_min) || !std::isfinite(b.y_min) || !std::isfinite(b.x_max) || !std::isfinite(b.y_max))
-      continue;
-    // Pixel u is inside when its centre u + 0.5 lies in [x_min - m, x_max + m] (depth pixels).
-    const int u0 = std::max(0, int(std::ceil((b.x_min - margin_px) * sx - 0.5f)));
-    const int u1 = std::min(depth.cols - 1, int(std::floor((b.x_max + margin_px) * sx - 0.5f)));
-    const int v0 = std::max(0, int(std::ceil((b.y_min - margin_px) * sy - 0.5f)));
-    const int v1 = std::min(depth.rows - 1, int(std::floor((b.y_max + margin_px) * sy - 0.5f)));
-    for (int v = v0; v <= v1; ++v) {
-      float* d = depth.ptr<float>(v);
-      uchar* m = mask.ptr<uchar>(v);
-      for (int u = u0; u <= u1; ++u) {
-        d[u] = nan;
-        m[u] = 255;
-      }
-    }
+    const cv::Rect r = maskedRect(b, margin_px, depth.size(), image_w, image_h);
+    if (r.empty()) continue;
+    depth(r).setTo(std::numeric_limits<float>::quiet_NaN());
+    mask(r).setTo(255);
   }
   return mask;
 }

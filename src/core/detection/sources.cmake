@@ -2,6 +2,7 @@
 set(FM_DETECTION_SOURCES
   detector.cpp
   detector_registry.cpp
+  held_depth.cpp
   depth_mask.cpp
   mask_decisions.cpp
   vehicle_motion.cpp

@@ -44,7 +44,8 @@ FrameSetMapper::FrameSetMapper(const Rig& rig, const FrameSetMapperConfig& confi
       depth_(rig, config.depth),
       detector_(std::move(detector)),
       tsdf_(std::make_unique<TsdfFusionStage>(config.tsdf, offlineTsdfOptions(), nullptr)),
-      motion_(config.mask.motion) {
+      motion_(config.mask.motion),
+      hold_(config.mask.mask_parked ? 0.0 : config.mask.hold_time) {
   config_.validate();
 }
 
@@ -170,6 +171,13 @@ FrameSetResult FrameSetMapper::maskAndFuse(FrameSetResult r, const ImageBoxes& u
       }
     }
   }
+  // As the depth mask nodelet: the depth undecided vehicles mask is held, and
+  // that of the vehicles decided parked now is fused after this frame set.
+  const std::int64_t stamp_ns = std::isfinite(stamp_s) ? std::llround(stamp_s * 1e9) : (next_unstamped_ns_ += 1000000000);
+  std::vector<VehicleDepthHold::Frame> released;
+  if (tracked && !config_.mask.mask_parked) {
+    released = hold_.update(stamp_ns, depth, use.boxes, r.motion, float(config_.mask.margin_px), bw, bh);
+  }
   r.mask = maskDepthBoxes(depth, masked, float(config_.mask.margin_px), bw, bh);
   r.masked_pixels = size_t(cv::countNonZero(r.mask));
   r.ms.mask_ms = msSince(tm);
@@ -177,10 +185,12 @@ FrameSetResult FrameSetMapper::maskAndFuse(FrameSetResult r, const ImageBoxes& u
   // As the TSDF nodelet: the grey image (the map's intensity, when it is one
   // grey image) and carve regions (parked vehicles that drove off) of the
   // frame set's stamp go to the stage before its depth.
-  const std::int64_t stamp_ns = std::isfinite(stamp_s) ? std::llround(stamp_s * 1e9) : (next_unstamped_ns_ += 1000000000);
   if (image.type() == CV_8UC1) tsdf_->addGrey(stamp_ns, image);
   tsdf_->setCarve(tracked ? motion_.ghostRegions() : std::vector<Eigen::AlignedBox3d>(), stamp_ns);
   r.fusion = tsdf_->fuse(depth, ref.model, T_W_B * ref.T_base_cam, T_W_B, stamp_ns).stats;
+  for (const auto& f : released) {
+    if (tsdf_->fuseHeld(f.depth, ref.model, f.stamp_ns)) ++r.held_frames_fused;
+  }
   if (++frame_sets_ % size_t(config_.mesh_every) == 0) tsdf_->updateMesh();
   r.ms.fuse_ms = msSince(tf);
   return r;

@@ -8,7 +8,7 @@
 namespace fisheye_mapping {
 
 namespace {
-constexpr size_t kGreysKept = 8;            // the depth stage is slower than the camera
+constexpr size_t kGreysKept = 24;  // the depth stage is slower than the camera; held depth comes seconds late
 constexpr std::int64_t kGreyMatchNs = 1000000;  // a grey image is the depth frame's within 1 ms
 constexpr std::int64_t kCarveWithinNs = 2000000000;  // carve regions apply to frames within 2 s
 }  // namespace
@@ -33,6 +33,7 @@ bool TsdfFusionStage::checkTimeReset(std::int64_t stamp_ns, std::string* reason)
   *reason = ev.reason;
   last_stamp_ns_ = 0;
   last_T_W_C_.reset();
+  recent_.clear();
   if (options_.clear_map_on_time_reset) {
     map_.clear();
     resetMesh();
@@ -66,18 +67,7 @@ TsdfFusionStage::Fused TsdfFusionStage::fuse(const cv::Mat& depth, const CameraM
                                              const Eigen::Isometry3d& T_W_C, const Eigen::Isometry3d& T_W_B,
                                              std::int64_t stamp_ns) {
   Fused out;
-  cv::Mat grey;
-  for (auto it = greys_.rbegin(); it != greys_.rend(); ++it) {
-    if (std::llabs(it->stamp_ns - stamp_ns) > kGreyMatchNs) continue;
-    if (it->image.cols != camera.width() || it->image.rows != camera.height()) {
-      out.intensity_note = "intensity image is " + std::to_string(it->image.cols) + "x" +
-                           std::to_string(it->image.rows) + ", the depth camera " + std::to_string(camera.width()) +
-                           "x" + std::to_string(camera.height()) + ": fused without intensity";
-    } else {
-      grey = it->image;
-    }
-    break;
-  }
+  const cv::Mat grey = greyFor(stamp_ns, camera, &out.intensity_note);
   std::vector<Eigen::AlignedBox3d> carve;
   if (!carve_.empty() && std::llabs(stamp_ns - carve_stamp_ns_) <= kCarveWithinNs) carve = carve_;
   out.observation_weight = observationWeight(T_W_C);
@@ -95,6 +85,39 @@ TsdfFusionStage::Fused TsdfFusionStage::fuse(const cv::Mat& depth, const CameraM
   last_T_W_C_ = T_W_C;
   last_stamp_ns_ = stamp_ns;
   ++frames_fused_;
+  recent_.push_back({stamp_ns, T_W_C, T_W_B, out.observation_weight});
+  while (recent_.size() > kRecentFramesKept) recent_.pop_front();
+  session_.changed();
+  return out;
+}
+
+cv::Mat TsdfFusionStage::greyFor(std::int64_t stamp_ns, const CameraModel& camera, std::string* note) const {
+  for (auto it = greys_.rbegin(); it != greys_.rend(); ++it) {
+    if (std::llabs(it->stamp_ns - stamp_ns) > kGreyMatchNs) continue;
+    if (it->image.cols != camera.width() || it->image.rows != camera.height()) {
+      *note = "intensity image is " + std::to_string(it->image.cols) + "x" + std::to_string(it->image.rows) +
+              ", the depth camera " + std::to_string(camera.width()) + "x" + std::to_string(camera.height()) +
+              ": fused without intensity";
+      return cv::Mat();
+    }
+    return it->image;
+  }
+  return cv::Mat();
+}
+
+std::optional<TsdfFusionStage::Fused> TsdfFusionStage::fuseHeld(const cv::Mat& depth, const CameraModel& camera,
+                                                                std::int64_t stamp_ns) {
+  auto it = std::find_if(recent_.rbegin(), recent_.rend(), [&](const Recent& r) { return r.stamp_ns == stamp_ns; });
+  if (it == recent_.rend()) return std::nullopt;
+  Fused out;
+  const cv::Mat grey = greyFor(stamp_ns, camera, &out.intensity_note);
+  std::vector<Eigen::AlignedBox3d> carve;
+  if (!carve_.empty() && std::llabs(stamp_ns - carve_stamp_ns_) <= kCarveWithinNs) carve = carve_;
+  out.observation_weight = it->observation_weight;
+  out.stats = map_.integrate(depth, camera, it->T_W_C, it->T_W_B.translation(), carve, grey, out.observation_weight);
+  out.with_intensity = !grey.empty();
+  blocks_carved_ += out.stats.blocks_carved;
+  ++held_frames_fused_;
   session_.changed();
   return out;
 }
@@ -155,6 +178,7 @@ void TsdfFusionStage::clear() {
   resetMesh();
   last_stamp_ns_ = 0;
   last_T_W_C_.reset();
+  recent_.clear();
   timeline_.reset();
   session_.changed();
 }

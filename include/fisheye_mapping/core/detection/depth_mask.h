@@ -36,6 +36,9 @@ struct DepthMaskConfig {
   /// false: only the moving ones and those not decided yet
   /// (VehicleMotionTracker), so that parked cars stay in the map.
   bool mask_parked = false;
+  /// s an undecided vehicle's masked depth is held, to be fused once it is
+  /// decided parked (VehicleDepthHold); 0: dropped at once, as before
+  double hold_time = 3.0;
   VehicleMotionConfig motion;
 
   /// Throws std::invalid_argument naming the parameter and the bad value.
@@ -49,6 +52,12 @@ struct DepthMaskConfig {
   static DepthMaskConfig fromParams(const ParamSource& p, DepthMaskConfig base);
   static DepthMaskConfig fromParams(const ParamSource& p) { return fromParams(p, DepthMaskConfig()); }
 };
+
+/// The depth pixels box `b` (of an image_w x image_h image) grown by margin_px
+/// on each side covers in a depth map of depth_size, as maskDepthBoxes masks
+/// them (a pixel is inside when its centre is); empty when none or when a
+/// corner is not finite.
+cv::Rect maskedRect(const Detection& b, float margin_px, cv::Size depth_size, int image_w, int image_h);
 
 /// Sets depth to NaN inside every box grown by `margin_px` on each side, and returns
 /// the mask (CV_8U, 255 where invalidated by a box). A pixel is inside when its centre

@@ -22,6 +22,7 @@
 #include "fisheye_mapping/core/depth/depth_stage.h"
 #include "fisheye_mapping/core/detection/depth_mask.h"
 #include "fisheye_mapping/core/detection/detector.h"
+#include "fisheye_mapping/core/detection/held_depth.h"
 #include "fisheye_mapping/core/tsdf/fusion_stage.h"
 
 namespace fisheye_mapping {
@@ -61,6 +62,7 @@ struct FrameSetResult {
   DepthResult depth;      // depth.depth: masked range image of the reference camera
   cv::Mat mask;           // CV_8U, 255 where a box removed depth
   size_t masked_pixels = 0;
+  size_t held_frames_fused = 0;  // earlier frame sets' held depth fused after this one (VehicleDepthHold)
   IntegrationStats fusion;
   FrameSetTimings ms;
   // When the depth stage's self-calibration updated in this frame set
@@ -141,6 +143,7 @@ class FrameSetMapper {
   std::unique_ptr<TsdfFusionStage> tsdf_;
   std::int64_t next_unstamped_ns_ = 0;  // stamps of frame sets given without one
   VehicleMotionTracker motion_;
+  VehicleDepthHold hold_;
   std::atomic<size_t> frame_sets_{0};
   // submit(): the previous frame set's detection and masking + fusion.
   std::shared_future<ImageBoxes> detection_;

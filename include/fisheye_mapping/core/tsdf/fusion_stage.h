@@ -26,6 +26,7 @@
 #include <vector>
 
 #include <Eigen/Geometry>
+#include <Eigen/StdVector>
 #include <opencv2/core.hpp>
 
 #include "fisheye_mapping/core/common/stream_timeline.h"
@@ -79,7 +80,16 @@ class TsdfFusionStage {
   // untouched) with the grey image and carve regions of its stamp.
   Fused fuse(const cv::Mat& depth, const CameraModel& camera, const Eigen::Isometry3d& T_W_C,
              const Eigen::Isometry3d& T_W_B, std::int64_t stamp_ns);
-  // The reference camera's grey image (CV_8UC1; kept, the last 8).
+  // Fuses held depth of an earlier fused frame (VehicleDepthHold: a vehicle
+  // masked there while undecided, decided parked since) with that frame's
+  // poses, observation weight, grey image and carve regions; the time state
+  // and the frame counts stay as they are. nullopt, nothing fused, when no
+  // frame of that stamp is among the last kRecentFramesKept fused (too old,
+  // skipped, or before a time reset or clear).
+  std::optional<Fused> fuseHeld(const cv::Mat& depth, const CameraModel& camera, std::int64_t stamp_ns);
+  static constexpr size_t kRecentFramesKept = 64;
+  size_t heldFramesFused() const { return held_frames_fused_; }
+  // The reference camera's grey image (CV_8UC1; kept, the last 24).
   void addGrey(std::int64_t stamp_ns, const cv::Mat& grey);
   // The latest carve regions (world frame).
   void setCarve(std::vector<Eigen::AlignedBox3d> regions, std::int64_t stamp_ns);
@@ -138,6 +148,15 @@ class TsdfFusionStage {
     cv::Mat image;
   };
   std::deque<Grey> greys_;
+  cv::Mat greyFor(std::int64_t stamp_ns, const CameraModel& camera, std::string* note) const;
+  // The last fused frames (fuseHeld).
+  struct Recent {
+    std::int64_t stamp_ns;
+    Eigen::Isometry3d T_W_C, T_W_B;
+    float observation_weight;
+  };
+  std::deque<Recent, Eigen::aligned_allocator<Recent>> recent_;
+  size_t held_frames_fused_ = 0;
   std::vector<Eigen::AlignedBox3d> carve_;
   std::int64_t carve_stamp_ns_ = 0;
   std::optional<Eigen::Isometry3d> last_T_W_B_;
