@@ -66,6 +66,16 @@ const ParamTable<DepthMaskConfig>& DepthMaskConfig::params() {
                 "A box this near the image border is cut by it: it keeps its track's decision (negative: never)")
         .number("duplicate_distance", [](C& c) -> double& { return c.motion.duplicate_distance; }, R::atLeast(0),
                 "m", "Boxes whose vehicles lie this close are one vehicle (one decision)")
+        .number("static_interval", [](C& c) -> double& { return c.motion.static_interval; }, R::atLeast(0), "s",
+                "The static check: a vehicle's body is compared with the depth map of this long before (agreeing: "
+                "it stands still); 0: off")
+        .number("static_share", [](C& c) -> double& { return c.motion.static_share; }, R::between(0, 1), "",
+                "Share of the body's points that must agree with that depth map for a frame set to look static")
+        .number("static_frames", [](C& c) -> int& { return c.motion.static_frames; }, R::atLeast(1), "",
+                "Frame sets in a row a vehicle must look static (moving, if at all, along the ego's heading) to be "
+                "called parked whatever its measured speed; one such frame set keeps it from being called moving")
+        .number("static_range", [](C& c) -> double& { return c.motion.static_range; }, R::above(0), "m",
+                "Vehicles farther from the camera are not checked (coarse depth)")
         .number("carve_time", [](C& c) -> double& { return c.motion.carve_time; }, R::atLeast(0), "s",
                 "Time the map carves free the region of a parked vehicle that drove off (0: never)")
         .number("carve_half_size", [](C& c) -> double& { return c.motion.carve_half_size; }, R::above(0), "m",

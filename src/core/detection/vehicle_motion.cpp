@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <string>
 #include <tuple>
@@ -24,6 +25,7 @@ VehicleMotionTracker::VehicleMotionTracker(const VehicleMotionConfig& config) : 
 void VehicleMotionTracker::reset() {
   tracks_.clear();
   ghosts_.clear();
+  past_.clear();
   last_stamp_ = -std::numeric_limits<double>::infinity();
 }
 
@@ -76,6 +78,18 @@ double VehicleMotionTracker::Track::speedError() const {
   return std::max(expected, sigma) / std::sqrt(stt);
 }
 
+bool VehicleMotionTracker::alongHeading(const Track& tr, const Eigen::Isometry3d& T_W_C) const {
+  Eigen::Vector2d velocity;
+  double stt, sigma;
+  if (!tr.fit(&velocity, &stt, &sigma)) return false;
+  const Eigen::Vector3d f = T_W_C.linear().col(2);
+  Eigen::Vector2d fwd(f.x(), f.y());
+  if (fwd.norm() < 0.1) return false;  // looking up or down: no heading
+  fwd.normalize();
+  // The velocity across the heading: less than half the moving speed.
+  return std::abs(fwd.x() * velocity.y() - fwd.y() * velocity.x()) < 0.5 * config_.moving_speed;
+}
+
 std::vector<Eigen::AlignedBox3d> VehicleMotionTracker::ghostRegions() const {
   std::vector<Eigen::AlignedBox3d> out;
   for (const Ghost& g : ghosts_) out.push_back(g.region);
@@ -84,7 +98,9 @@ std::vector<Eigen::AlignedBox3d> VehicleMotionTracker::ghostRegions() const {
 
 std::optional<Eigen::Vector3d> VehicleMotionTracker::place(const Detection& box, int image_w, int image_h,
                                                            const cv::Mat& depth, const CameraModel& camera,
-                                                           const Eigen::Isometry3d& T_W_C) const {
+                                                           const Eigen::Isometry3d& T_W_C,
+                                                           std::vector<Eigen::Vector3d>* body_C) const {
+  if (body_C) body_C->clear();
   if (!std::isfinite(box.x_min) || !std::isfinite(box.y_min) || !std::isfinite(box.x_max) || !std::isfinite(box.y_max))
     return std::nullopt;
   const double sx = double(depth.cols) / image_w, sy = double(depth.rows) / image_h;
@@ -131,6 +147,7 @@ std::optional<Eigen::Vector3d> VehicleMotionTracker::place(const Detection& box,
   std::vector<double> as, ls, zs;
   for (const auto& p : pts) {
     if (p.first > limit) continue;
+    if (body_C) body_C->push_back(p.second);
     const Eigen::Vector3d w = T_W_C * p.second;
     as.push_back(fwd.dot(w));
     ls.push_back(side.dot(w));
@@ -145,6 +162,33 @@ std::optional<Eigen::Vector3d> VehicleMotionTracker::place(const Detection& box,
   const double a = quantile(as, level ? 0.2 : 0.5), l = quantile(ls, 0.5), z = quantile(zs, 0.5);
   const Eigen::Vector3d xy = a * fwd + l * side;
   return Eigen::Vector3d(xy.x(), xy.y(), z);
+}
+
+double VehicleMotionTracker::staticShare(const std::vector<Eigen::Vector3d>& body_C, const Eigen::Isometry3d& T_W_C,
+                                         const cv::Mat& past, const CameraModel& camera,
+                                         const Eigen::Isometry3d& T_W_P) const {
+  const Eigen::Isometry3d T_P_C = T_W_P.inverse() * T_W_C;
+  int seen = 0, agree = 0;
+  for (const Eigen::Vector3d& p : body_C) {
+    const Eigen::Vector3d q = T_P_C * p;
+    Eigen::Vector2d px;
+    if (!camera.project(q, &px) || !camera.isInImage(px)) continue;
+    const int u = int(std::floor(px.x())), v = int(std::floor(px.y()));
+    const double r = q.norm(), r10 = r / 10.0;
+    const double tolerance = 2.0 * config_.position_noise * std::max(1.0, r10 * r10);
+    double best = std::numeric_limits<double>::infinity();
+    for (int y = std::max(0, v - 1); y <= std::min(past.rows - 1, v + 1); ++y) {
+      const float* d = past.ptr<float>(y);
+      for (int x = std::max(0, u - 1); x <= std::min(past.cols - 1, u + 1); ++x) {
+        if (std::isfinite(d[x])) best = std::min(best, std::abs(double(d[x]) - r));
+      }
+    }
+    if (!std::isfinite(best)) continue;  // no depth there: no evidence
+    ++seen;
+    agree += best <= tolerance;
+  }
+  if (seen < config_.min_points) return std::numeric_limits<double>::quiet_NaN();
+  return double(agree) / seen;
 }
 
 std::vector<VehicleMotionTracker::Decision> VehicleMotionTracker::update(
@@ -169,11 +213,24 @@ std::vector<VehicleMotionTracker::Decision> VehicleMotionTracker::update(
                 ghosts_.end());
   std::vector<Decision> out(boxes.size());
   if (!T_W_C) return out;  // no pose: nothing can be placed
+  // The static check's depth map: the newest at least static_interval old
+  // (none when the newest kept is more than three intervals old).
+  const Past* past = nullptr;
+  const double dt = config_.static_interval;
+  if (dt > 0.0) {
+    while (past_.size() > 1 && stamp_s - past_[1].stamp >= dt) past_.pop_front();
+    if (!past_.empty() && stamp_s - past_.front().stamp >= dt && stamp_s - past_.front().stamp <= 3.0 * dt)
+      past = &past_.front();
+  }
+  std::vector<double> share(boxes.size(), std::numeric_limits<double>::quiet_NaN());
   std::vector<std::optional<Eigen::Vector3d>> pos(boxes.size());
   std::vector<char> cut(boxes.size(), 0);
   const double m = config_.border_px;
+  std::vector<Eigen::Vector3d> body;
   for (size_t i = 0; i < boxes.size(); ++i) {
-    pos[i] = place(boxes[i], image_w, image_h, depth, camera, *T_W_C);
+    pos[i] = place(boxes[i], image_w, image_h, depth, camera, *T_W_C, past ? &body : nullptr);
+    if (past && pos[i] && (*pos[i] - T_W_C->translation()).norm() <= config_.static_range)
+      share[i] = staticShare(body, *T_W_C, past->depth, camera, past->T_W_C);
     if (pos[i]) out[i].position = *pos[i];
     const Detection& b = boxes[i];
     cut[i] = b.x_min <= m || b.y_min <= m || b.x_max >= image_w - m || b.y_max >= image_h - m;
@@ -236,8 +293,14 @@ std::vector<VehicleMotionTracker::Decision> VehicleMotionTracker::update(
       const double margin = config_.speed_significance > 0.0
                                 ? config_.speed_significance * tr.speedError()
                                 : 0.0;
+      // The static check: measured now, counted in a row; it speaks only for
+      // a vehicle whose measured velocity runs along the ego's heading.
+      const bool still = std::isfinite(share[i]) && share[i] >= config_.static_share;
+      if (std::isfinite(share[i])) tr.static_hits = still ? tr.static_hits + 1 : 0;
+      const bool along = alongHeading(tr, *T_W_C);
+      const bool static_parked = along && tr.static_hits >= config_.static_frames;
       if (stamp_s - tr.first_seen + 1e-9 >= config_.decide_after && std::isfinite(speed) && std::isfinite(margin)) {
-        if (speed - margin >= config_.moving_speed) {
+        if (speed - margin >= config_.moving_speed && !(still && along)) {
           if (tr.state == VehicleMotion::Parked && config_.carve_time > 0) {
             // Fused while parked, gone now: its region is carved.
             const Eigen::Vector3d h(config_.carve_half_size, config_.carve_half_size, 0.0);
@@ -248,8 +311,8 @@ std::vector<VehicleMotionTracker::Decision> VehicleMotionTracker::update(
             ghosts_.push_back(g);
           }
           tr.state = VehicleMotion::Moving;
-        } else if (tr.state != VehicleMotion::Moving && speed < config_.moving_speed) {
-          if (speed + margin < config_.moving_speed) tr.state = VehicleMotion::Parked;
+        } else if (tr.state != VehicleMotion::Moving && (speed < config_.moving_speed || static_parked)) {
+          if (speed + margin < config_.moving_speed || static_parked) tr.state = VehicleMotion::Parked;
           if (tr.state == VehicleMotion::Parked && !off_parked) tr.parked_position = *pos[i];
         }
       }
@@ -284,6 +347,7 @@ std::vector<VehicleMotionTracker::Decision> VehicleMotionTracker::update(
     tracks_.push_back(std::move(tr));
     out[i].track = tracks_.back().id;  // undecided: new
   }
+  if (dt > 0.0) past_.push_back({stamp_s, depth.clone(), *T_W_C});
   return out;
 }
 

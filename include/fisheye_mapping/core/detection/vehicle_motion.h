@@ -19,7 +19,15 @@
 // moving_speed; moving above, parked below, undecided (masked) in between.
 // A few noisy positions at first sight (a parked car's first boxes placed a
 // metre apart) so no longer decide "moving" for good.
-// A vehicle once seen moving stays moving. A box of a parked vehicle's
+// A vehicle once seen moving stays moving. The static check (within
+// static_range) compares the body's depth with the camera's depth map of
+// static_interval earlier: a vehicle that looks static (static_share of its
+// points agree) is not called moving, and one that has looked static in
+// static_frames frame sets in a row is called parked whatever its measured
+// speed, both only while its measured velocity runs along the ego's heading:
+// the near face of a parked car passed close by slides that way, while a
+// vehicle crossing moves across it, its flank sliding along itself (which
+// the depth check cannot see). A box of a parked vehicle's
 // track placed more than `parked_tolerance` (plus twice its expected
 // scatter) from where the vehicle stands is undecided (masked), not parked:
 // another vehicle driving past taken for it, or the vehicle driving off. A box cut by the image border
@@ -73,6 +81,16 @@ struct VehicleMotionConfig {
   double decide_range = 25.0;  ///< m: a vehicle farther from the camera is tracked but not measured
   double border_px = 3.0;      ///< px (of the detection image): a box this near the border is cut by it
   double duplicate_distance = 1.0;  ///< m between two boxes of one vehicle
+  /// The static check: a vehicle's body points, placed in the world, are
+  /// projected into the camera's depth map of static_interval s earlier;
+  /// where that map sees them where they stand (within twice the position
+  /// noise), the share that agrees tells a parked body (most) from a moving
+  /// one (few), also where the placed position slides (a parked car passed
+  /// close by: its near face changes). 0: off.
+  double static_interval = 0.5;
+  double static_share = 0.5;   ///< share of the seen body points that agree for a frame set to look static
+  int static_frames = 3;       ///< frame sets in a row a vehicle must look static to be called parked (or not moving)
+  double static_range = 15.0;  ///< m: farther vehicles are not checked (coarse depth)
   double carve_time = 10.0;         ///< s a departed parked vehicle's region is carved; 0: never
   double carve_half_size = 3.0;     ///< m: half the side of that region (horizontal)
 };
@@ -107,9 +125,18 @@ class VehicleMotionTracker {
   std::vector<Eigen::AlignedBox3d> ghostRegions() const;
 
   /// The world position of the vehicle in `box` (see the top of the file),
-  /// none with fewer than min_points usable depth pixels.
+  /// none with fewer than min_points usable depth pixels; with body_C, the
+  /// body's points in the camera too.
   std::optional<Eigen::Vector3d> place(const Detection& box, int image_w, int image_h, const cv::Mat& depth,
-                                       const CameraModel& camera, const Eigen::Isometry3d& T_W_C) const;
+                                       const CameraModel& camera, const Eigen::Isometry3d& T_W_C,
+                                       std::vector<Eigen::Vector3d>* body_C = nullptr) const;
+  /// The share of `body_C` (points in the camera at T_W_C) that an earlier
+  /// depth map of the same camera (`past`, at T_W_P) sees where a static body
+  /// would be: projected there, a range within twice the position noise of
+  /// that map's (the 3 x 3 pixels around). NaN with fewer than min_points
+  /// seen there.
+  double staticShare(const std::vector<Eigen::Vector3d>& body_C, const Eigen::Isometry3d& T_W_C, const cv::Mat& past,
+                     const CameraModel& camera, const Eigen::Isometry3d& T_W_P) const;
 
  private:
   struct Track {
@@ -127,6 +154,7 @@ class VehicleMotionTracker {
     bool fit(Eigen::Vector2d* velocity, double* stt, double* sigma) const;
     double speed() const;
     std::deque<double> noise;  // each history position's expected scatter (m)
+    int static_hits = 0;       // frame sets in a row it looked static (the static check)
     // The speed's standard error: the positions' scatter about the fitted
     // line (at least their expected scatter) over the root of the stamps' spread.
     double speedError() const;
@@ -134,11 +162,22 @@ class VehicleMotionTracker {
   // The expected scatter of a position placed at p_W from a camera at T_W_C:
   // position_noise at 10 m or nearer, growing with the square of the range.
   double positionNoise(const Eigen::Vector3d& p_W, const Eigen::Isometry3d& T_W_C) const;
+  // Whether a track's measured velocity runs along the heading of the
+  // camera at T_W_C (its component across less than half moving_speed).
+  bool alongHeading(const Track& tr, const Eigen::Isometry3d& T_W_C) const;
   struct Ghost {
     Eigen::AlignedBox3d region;
     double until = 0.0;
   };
   std::vector<Ghost> ghosts_;
+  // The depth maps the static check compares with: the newest at least
+  // static_interval old and those after it.
+  struct Past {
+    double stamp;
+    cv::Mat depth;
+    Eigen::Isometry3d T_W_C;
+  };
+  std::deque<Past, Eigen::aligned_allocator<Past>> past_;
   VehicleMotionConfig config_;
   std::vector<Track> tracks_;
   int next_id_ = 0;
