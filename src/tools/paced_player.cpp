@@ -27,7 +27,9 @@
 //   start          seconds into the bag to begin (default 0)
 //   loops          play the drive this many times in a row (default 1; a
 //                  soak: scripts/checks/soak). Each pass after the first is
-//                  moved later in time by the drive's length + 1 s: every
+//                  moved later in time by the drive's length + 0.1 s (far
+//                  under the stages' 1 s time-reset threshold: the clock
+//                  reaches a node after a pass's first images): every
 //                  stamp (headers, /tf, /clock) keeps going forward, so
 //                  the pipeline sees one long drive in which the vehicle
 //                  jumps back to the start; /tf_static goes out once
@@ -482,7 +484,12 @@ int main(int argc, char** argv) {
   std::map<std::string, geometry_msgs::TransformStamped> last_pose;  // child frame -> latest /tf
   ros::Time last_clock, last_tf_stamp;
   const double duration = (view.getEndTime() - begin).toSec();
-  const ros::Duration pass_length(duration + 1.0);  // ~loops: how much later each pass is played
+  // ~loops: how much later each pass is played. The gap between passes stays
+  // far under the stages' time-reset threshold (1 s): a node's clock lags the
+  // images a little, and with a 1 s gap a sync that saw a new pass's second
+  // frame set before its clock caught up took the clock for one jumping back
+  // (a soak lost 2 frame sets so).
+  const ros::Duration pass_length(duration + 0.1);
   std::map<std::string, bool> has_header;           // topic -> its type's first field is a Header
   bool stopped_early = false;  // ~stop_after
   for (int pass = 0; pass < loops && ros::ok() && !bad_input && !stopped_early; ++pass) {
