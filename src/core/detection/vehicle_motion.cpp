@@ -63,8 +63,12 @@ double VehicleMotionTracker::Track::speed() const {
 }
 
 double VehicleMotionTracker::positionNoise(const Eigen::Vector3d& p_W, const Eigen::Isometry3d& T_W_C) const {
+  return noiseAt((p_W - T_W_C.translation()).norm());
+}
+
+double VehicleMotionTracker::noiseAt(double range) const {
   // Stereo depth error grows with the square of the range.
-  const double r = (p_W - T_W_C.translation()).norm() / 10.0;
+  const double r = range / 10.0;
   return config_.position_noise * std::max(1.0, r * r);
 }
 
@@ -174,8 +178,8 @@ double VehicleMotionTracker::staticShare(const std::vector<Eigen::Vector3d>& bod
     Eigen::Vector2d px;
     if (!camera.project(q, &px) || !camera.isInImage(px)) continue;
     const int u = int(std::floor(px.x())), v = int(std::floor(px.y()));
-    const double r = q.norm(), r10 = r / 10.0;
-    const double tolerance = 2.0 * config_.position_noise * std::max(1.0, r10 * r10);
+    const double r = q.norm();
+    const double tolerance = 2.0 * noiseAt(r);
     double best = std::numeric_limits<double>::infinity();
     for (int y = std::max(0, v - 1); y <= std::min(past.rows - 1, v + 1); ++y) {
       const float* d = past.ptr<float>(y);

@@ -162,6 +162,7 @@ class VehicleMotionTracker {
   // The expected scatter of a position placed at p_W from a camera at T_W_C:
   // position_noise at 10 m or nearer, growing with the square of the range.
   double positionNoise(const Eigen::Vector3d& p_W, const Eigen::Isometry3d& T_W_C) const;
+  double noiseAt(double range) const;  // the same at a range from the camera
   // Whether a track's measured velocity runs along the heading of the
   // camera at T_W_C (its component across less than half moving_speed).
   bool alongHeading(const Track& tr, const Eigen::Isometry3d& T_W_C) const;
