@@ -487,12 +487,19 @@ TEST(DynamicObjects, OnlyMovingVehiclesAreMasked) {
   ASSERT_TRUE(waitFor([&] { return depth_pub.getNumSubscribers() > 0 && det_pub.getNumSubscribers() > 0; }, 20.0));
   info_pub.publish(info);
   ros::WallDuration(1.0).sleep();
-  // Two car fronts 10 m ahead (the plane z = 10 inside their boxes, nothing
-  // elsewhere): the parked one 5 m left, the moving one crossing from the
-  // right at 10 m/s.
+  // Two car fronts 10 m ahead (the plane z = 10 inside their boxes) before a
+  // facade 30 m ahead (where the static check finds that the crossing car's
+  // body was not there 0.5 s before: moving): the parked one 5 m left, the
+  // moving one crossing from the right at 10 m/s.
   auto frame = [&](int k, const std::string& frame_id) {
     const ros::Time t = ros::Time(1700000400, 0) + ros::Duration(0.2 * k);
-    cv::Mat depth(H, W, CV_32FC1, cv::Scalar(std::numeric_limits<float>::quiet_NaN()));
+    cv::Mat depth(H, W, CV_32FC1);
+    for (int v = 0; v < H; ++v) {
+      for (int u = 0; u < W; ++u) {
+        const double rx = (u + 0.5 - W / 2.0) / f, ry = (v + 0.5 - H / 2.0) / f;
+        depth.at<float>(v, u) = float(30.0 * std::sqrt(rx * rx + ry * ry + 1.0));  // range to z = 30
+      }
+    }
     fisheye_mapping::Detection2DArray dets;
     dets.header.stamp = t;
     dets.header.frame_id = frame_id;

@@ -307,6 +307,10 @@ TEST(ParamDeclarations, CrossFieldRulesHoldThroughIncludedTables) {
   m.set("consistency_window", 4);
   EXPECT_EQ(refusal([&] { fm::DepthFilterConfig::fromParams(m); }), "consistency_window: must be odd, got 4");
   fm::MapParams colour;
+  fm::MapParams shares;
+  shares.set("moving_share", 0.5);
+  EXPECT_EQ(refusal([&] { fm::DepthMaskConfig::fromParams(shares); }),
+            "moving_share: must be [0, 0.5) (below static_share), got 0.5");
   colour.set("colour_range", std::vector<double>{30.0, 10.0});
   EXPECT_EQ(refusal([&] { fm::DepthMaskConfig::fromParams(colour); }),
             "colour_range: must be > 30 m (far greater than near), got 10");

@@ -73,7 +73,11 @@ const ParamTable<DepthMaskConfig>& DepthMaskConfig::params() {
                 "Share of the body's points that must agree with that depth map for a frame set to look static")
         .number("static_frames", [](C& c) -> int& { return c.motion.static_frames; }, R::atLeast(1), "",
                 "Frame sets in a row a vehicle must look static (moving, if at all, along the ego's heading) to be "
-                "called parked whatever its measured speed; one such frame set keeps it from being called moving")
+                "called parked whatever its measured speed")
+        .number("moving_share", [](C& c) -> double& { return c.motion.moving_share; }, R::between(0, 1), "",
+                "With the static check on, a vehicle is called moving only when at most this share of its body "
+                "agrees with that depth map (beyond static_range, or in between, it stays undecided, masked); "
+                "below static_share")
         .number("static_range", [](C& c) -> double& { return c.motion.static_range; }, R::above(0), "m",
                 "Vehicles farther from the camera are not checked (coarse depth)")
         .number("carve_time", [](C& c) -> double& { return c.motion.carve_time; }, R::atLeast(0), "s",
@@ -81,6 +85,9 @@ const ParamTable<DepthMaskConfig>& DepthMaskConfig::params() {
         .number("carve_half_size", [](C& c) -> double& { return c.motion.carve_half_size; }, R::above(0), "m",
                 "Half the side of that region, around where the vehicle was parked");
     t.rule([](const C& c) {
+      if (!(c.motion.moving_share < c.motion.static_share))
+        requireInRange("moving_share", ParamRange{0.0, c.motion.static_share, false, true}, c.motion.moving_share,
+                       "(below static_share)");
       if (!(c.colour_far > c.colour_near))
         requireInRange("colour_range", ParamRange::above(c.colour_near), c.colour_far, "m (far greater than near)");
     });

@@ -278,13 +278,20 @@ std::vector<VehicleMotionTracker::Decision> VehicleMotionTracker::update(
     tr.last_seen = stamp_s;
     tr.last_position = *pos[i];
     out[i].track = tr.id;
+    // The static check: most of the body's points agree with the depth
+    // map of static_interval earlier.
+    const bool still = std::isfinite(share[i]) && share[i] >= config_.static_share;
     // A parked vehicle stays where it is: a box of its track placed farther
     // from where it stands than its scatter allows is another vehicle taken
-    // for it (one driving past) or it drives off. Not fused as parked.
+    // for it (one driving past) or it drives off. Not fused as parked --
+    // unless the static check finds its body standing (the placed position
+    // of a parked car passed close by slides as its near face leaves the
+    // box) while the track's velocity runs along the ego's heading.
     const double noise_i = positionNoise(*pos[i], *T_W_C);
     const bool off_parked =
         !cut[i] && tr.state == VehicleMotion::Parked &&
-        (pos[i]->head<2>() - tr.parked_position.head<2>()).norm() > config_.parked_tolerance + 2.0 * noise_i;
+        (pos[i]->head<2>() - tr.parked_position.head<2>()).norm() > config_.parked_tolerance + 2.0 * noise_i &&
+        !(still && alongHeading(tr, *T_W_C));
     if (!cut[i]) {
       tr.history.emplace_back(stamp_s, *pos[i]);
       tr.noise.push_back(noise_i);
@@ -299,25 +306,42 @@ std::vector<VehicleMotionTracker::Decision> VehicleMotionTracker::update(
                                 : 0.0;
       // The static check: measured now, counted in a row; it speaks only for
       // a vehicle whose measured velocity runs along the ego's heading.
-      const bool still = std::isfinite(share[i]) && share[i] >= config_.static_share;
       if (std::isfinite(share[i])) tr.static_hits = still ? tr.static_hits + 1 : 0;
       const bool along = alongHeading(tr, *T_W_C);
       const bool static_parked = along && tr.static_hits >= config_.static_frames;
       if (stamp_s - tr.first_seen + 1e-9 >= config_.decide_after && std::isfinite(speed) && std::isfinite(margin)) {
-        if (speed - margin >= config_.moving_speed && !(still && along)) {
+        // Called moving only where the static check (when on) finds the
+        // body moved: at most moving_share of it agrees with the depth map
+        // of static_interval before. A vehicle it cannot measure (farther
+        // than static_range, no depth there) stays undecided, so masked: a
+        // far parked car's placed position slides with the coarse depth (it
+        // read 4-5 m/s 20-25 m ahead), and a crossing one's flank fools it.
+        const bool moved = config_.static_interval <= 0.0 ||
+                           (std::isfinite(share[i]) && share[i] < config_.moving_share);
+        if (speed - margin >= config_.moving_speed && moved) {
           if (tr.state == VehicleMotion::Parked && config_.carve_time > 0) {
             // Fused while parked, gone now: its region is carved.
             const Eigen::Vector3d h(config_.carve_half_size, config_.carve_half_size, 0.0);
             Ghost g;
-            g.region = Eigen::AlignedBox3d(tr.parked_position - h - Eigen::Vector3d(0, 0, 1.5),
-                                           tr.parked_position + h + Eigen::Vector3d(0, 0, 2.5));
+            g.region = Eigen::AlignedBox3d(tr.parked_centre - h - Eigen::Vector3d(0, 0, 1.5),
+                                           tr.parked_centre + h + Eigen::Vector3d(0, 0, 2.5));
             g.until = stamp_s + config_.carve_time;
             ghosts_.push_back(g);
           }
           tr.state = VehicleMotion::Moving;
         } else if (tr.state != VehicleMotion::Moving && (speed < config_.moving_speed || static_parked)) {
           if (speed + margin < config_.moving_speed || static_parked) tr.state = VehicleMotion::Parked;
-          if (tr.state == VehicleMotion::Parked && !off_parked) tr.parked_position = *pos[i];
+          if (tr.state == VehicleMotion::Parked && !off_parked) {
+            tr.parked_position = *pos[i];
+            // The placed position is the face toward the camera along its
+            // horizontal viewing direction: the body's middle lies half a
+            // car's length (2.25 m) beyond it, which the carved region is
+            // centred on.
+            Eigen::Vector3d fwd = T_W_C->linear().col(2);
+            fwd.z() = 0.0;
+            tr.parked_centre = *pos[i];
+            if (fwd.norm() > 0.1) tr.parked_centre += 2.25 * fwd.normalized();
+          }
         }
       }
     }

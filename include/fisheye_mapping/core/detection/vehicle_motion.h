@@ -21,16 +21,19 @@
 // metre apart) so no longer decide "moving" for good.
 // A vehicle once seen moving stays moving. The static check (within
 // static_range) compares the body's depth with the camera's depth map of
-// static_interval earlier: a vehicle that looks static (static_share of its
-// points agree) is not called moving, and one that has looked static in
-// static_frames frame sets in a row is called parked whatever its measured
-// speed, both only while its measured velocity runs along the ego's heading:
-// the near face of a parked car passed close by slides that way, while a
-// vehicle crossing moves across it, its flank sliding along itself (which
-// the depth check cannot see). A box of a parked vehicle's
+// static_interval earlier: a vehicle is called moving only when its body
+// moved (at most moving_share of its points agree; beyond static_range, or
+// in between, it stays undecided); one that has looked static (static_share
+// agree) in static_frames frame sets in a row is called parked whatever its
+// measured speed, only while its measured velocity runs along the ego's
+// heading: the near face of a parked car passed close by slides that way,
+// while a vehicle crossing moves across it, its flank sliding along itself
+// (which the depth check cannot see). A box of a parked vehicle's
 // track placed more than `parked_tolerance` (plus twice its expected
 // scatter) from where the vehicle stands is undecided (masked), not parked:
-// another vehicle driving past taken for it, or the vehicle driving off. A box cut by the image border
+// another vehicle driving past taken for it, or the vehicle driving off --
+// unless that frame set's static check finds its body standing, with the
+// velocity along the heading (the slide of a car passed close by). A box cut by the image border
 // only shows part of its vehicle, a part that changes as the vehicle leaves
 // the view (a parked car passed by seems to move along with the ego), so it
 // keeps its track's decision and position for the association but does not
@@ -91,6 +94,11 @@ struct VehicleMotionConfig {
   double static_share = 0.5;   ///< share of the seen body points that agree for a frame set to look static
   int static_frames = 3;       ///< frame sets in a row a vehicle must look static to be called parked (or not moving)
   double static_range = 15.0;  ///< m: farther vehicles are not checked (coarse depth)
+  /// With the static check on, a vehicle is called moving only when at most
+  /// this share of its body agrees with that depth map (< static_share):
+  /// where the check cannot measure (beyond static_range, no depth there)
+  /// or reads in between, the vehicle stays undecided (masked).
+  double moving_share = 0.25;
   double carve_time = 10.0;         ///< s a departed parked vehicle's region is carved; 0: never
   double carve_half_size = 3.0;     ///< m: half the side of that region (horizontal)
 };
@@ -148,6 +156,7 @@ class VehicleMotionTracker {
     double first_seen = 0.0;
     VehicleMotion state = VehicleMotion::Undecided;
     Eigen::Vector3d parked_position;   // the last one while parked
+    Eigen::Vector3d parked_centre;     // the body's middle then: a half length on from the near face
     // The least-squares line through the history: velocity, the stamps'
     // spread (sum of squared deviations) and the positions' scatter about it
     // per axis (0 with two points); false with fewer than two stamps apart.
