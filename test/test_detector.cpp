@@ -17,19 +17,17 @@
 #include <vector>
 
 #include "fisheye_mapping/core/detection/detector.h"
+#include "scratch_dir.h"
 
 using namespace fisheye_mapping;
 namespace fm = fisheye_mapping;
 
 namespace {
 
+// Removed when the test program ends.
 std::string tmpDir() {
-  static std::string dir;
-  if (dir.empty()) {
-    char tmpl[] = "/tmp/fm_test_detector_XXXXXX";
-    dir = mkdtemp(tmpl);
-  }
-  return dir;
+  static const fm::test::ScratchDir dir("/tmp/fm_test_detector_");
+  return dir.path();
 }
 
 void writeText(const std::string& path, const std::string& text) {

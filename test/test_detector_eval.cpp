@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "scratch_dir.h"
 #include "tool_run.h"
 
 using fisheye_mapping::test::runTool;
@@ -20,13 +21,10 @@ using fisheye_mapping::test::runToolApart;
 
 namespace {
 
+// Removed when the test program ends.
 std::string tmpDir() {
-  static std::string dir;
-  if (dir.empty()) {
-    char tmpl[] = "/tmp/fm_test_detector_eval_XXXXXX";
-    dir = mkdtemp(tmpl);
-  }
-  return dir;
+  static const fisheye_mapping::test::ScratchDir dir("/tmp/fm_test_detector_eval_");
+  return dir.path();
 }
 
 void writeText(const std::string& path, const std::string& text) {

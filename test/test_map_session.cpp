@@ -64,6 +64,7 @@ class MapSessionTest : public ::testing::Test {
     fs::create_directories(dir_);
     path_ = dir_ + "/map.fmtsdf";
   }
+  void TearDown() override { fs::remove_all(dir_); }
   std::string dir_, path_;
 };
 

@@ -23,6 +23,7 @@
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <fstream>
 #include <map>
 #include <mutex>
@@ -496,5 +497,12 @@ int main(int argc, char** argv) {
   ros::init(argc, argv, "test_paced_player");
   ros::AsyncSpinner spinner(2);
   spinner.start();
-  return RUN_ALL_TESTS();
+  const int result = RUN_ALL_TESTS();
+  // The bags, logs and summaries this run wrote (named by its pid) go.
+  const std::string prefix = "fisheye_mapping_paced_" + std::to_string(getpid()) + "_";
+  std::error_code ec;
+  for (const auto& e : std::filesystem::directory_iterator("/tmp", ec)) {
+    if (e.path().filename().string().rfind(prefix, 0) == 0) std::filesystem::remove(e.path(), ec);
+  }
+  return result;
 }

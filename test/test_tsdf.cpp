@@ -13,6 +13,7 @@
 #include "fisheye_mapping/core/common/opencl_context.h"
 #include "fisheye_mapping/core/tsdf/tsdf_map.h"
 #include "fisheye_mapping/core/tsdf/tsdf_mesher.h"
+#include "scratch_dir.h"
 #include "test_utils.h"
 
 namespace fisheye_mapping {
@@ -47,9 +48,14 @@ std::vector<Eigen::Isometry3d> orbit() {
   return poses;
 }
 
+// A fresh directory inside the program's scratch directory (removed when
+// the program ends).
 std::string tempDir() {
-  char tmpl[] = "/tmp/fm_tsdf_test_XXXXXX";
-  return mkdtemp(tmpl);
+  static const fisheye_mapping::test::ScratchDir root("/tmp/fm_tsdf_test_");
+  static int n = 0;
+  const std::string d = root.path() + "/" + std::to_string(n++);
+  std::filesystem::create_directories(d);
+  return d;
 }
 
 class Tsdf : public ::testing::Test {

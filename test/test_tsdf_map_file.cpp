@@ -27,6 +27,7 @@
 
 #include "fisheye_mapping/core/sim/analytic_scene.h"
 #include "fisheye_mapping/core/tsdf/tsdf_map.h"
+#include "scratch_dir.h"
 #include "test_utils.h"
 
 namespace fisheye_mapping {
@@ -121,9 +122,14 @@ Snapshot snapshot(const TsdfMap& map) {
   return ::testing::AssertionSuccess();
 }
 
+// A fresh directory inside the program's scratch directory (removed when
+// the program ends).
 std::string tempDir() {
-  char tmpl[] = "/tmp/fm_map_file_test_XXXXXX";
-  return mkdtemp(tmpl);
+  static const fisheye_mapping::test::ScratchDir root("/tmp/fm_map_file_test_");
+  static int n = 0;
+  const std::string d = root.path() + "/" + std::to_string(n++);
+  std::filesystem::create_directories(d);
+  return d;
 }
 
 std::string readBytes(const std::string& path) {

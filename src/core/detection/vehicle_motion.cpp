@@ -278,20 +278,16 @@ std::vector<VehicleMotionTracker::Decision> VehicleMotionTracker::update(
     tr.last_seen = stamp_s;
     tr.last_position = *pos[i];
     out[i].track = tr.id;
-    // The static check: most of the body's points agree with the depth
-    // map of static_interval earlier.
-    const bool still = std::isfinite(share[i]) && share[i] >= config_.static_share;
     // A parked vehicle stays where it is: a box of its track placed farther
     // from where it stands than its scatter allows is another vehicle taken
-    // for it (one driving past) or it drives off. Not fused as parked --
-    // unless the static check finds its body standing (the placed position
-    // of a parked car passed close by slides as its near face leaves the
-    // box) while the track's velocity runs along the ego's heading.
+    // for it (one driving past) or it drives off. Not fused as parked. (The
+    // static check cannot overrule this: a truck overtaking close by, seen
+    // by its flank, agrees with the depth map of 0.5 s before as a standing
+    // body does.)
     const double noise_i = positionNoise(*pos[i], *T_W_C);
     const bool off_parked =
         !cut[i] && tr.state == VehicleMotion::Parked &&
-        (pos[i]->head<2>() - tr.parked_position.head<2>()).norm() > config_.parked_tolerance + 2.0 * noise_i &&
-        !(still && alongHeading(tr, *T_W_C));
+        (pos[i]->head<2>() - tr.parked_position.head<2>()).norm() > config_.parked_tolerance + 2.0 * noise_i;
     if (!cut[i]) {
       tr.history.emplace_back(stamp_s, *pos[i]);
       tr.noise.push_back(noise_i);
@@ -306,6 +302,7 @@ std::vector<VehicleMotionTracker::Decision> VehicleMotionTracker::update(
                                 : 0.0;
       // The static check: measured now, counted in a row; it speaks only for
       // a vehicle whose measured velocity runs along the ego's heading.
+      const bool still = std::isfinite(share[i]) && share[i] >= config_.static_share;
       if (std::isfinite(share[i])) tr.static_hits = still ? tr.static_hits + 1 : 0;
       const bool along = alongHeading(tr, *T_W_C);
       const bool static_parked = along && tr.static_hits >= config_.static_frames;

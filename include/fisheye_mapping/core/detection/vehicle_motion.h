@@ -31,9 +31,7 @@
 // (which the depth check cannot see). A box of a parked vehicle's
 // track placed more than `parked_tolerance` (plus twice its expected
 // scatter) from where the vehicle stands is undecided (masked), not parked:
-// another vehicle driving past taken for it, or the vehicle driving off --
-// unless that frame set's static check finds its body standing, with the
-// velocity along the heading (the slide of a car passed close by). A box cut by the image border
+// another vehicle driving past taken for it, or the vehicle driving off. A box cut by the image border
 // only shows part of its vehicle, a part that changes as the vehicle leaves
 // the view (a parked car passed by seems to move along with the ego), so it
 // keeps its track's decision and position for the association but does not
