@@ -166,12 +166,12 @@ TEST(FieldOfView, NoValidPixelGivesZero) {
   EXPECT_EQ(fov.max_off_axis_deg, 0.0);
 }
 
-// KNOWN BUG (rig_geometry.cpp, reported, not fixed here): the vertical span is
-// scanned along the column u = cx even when cx lies outside the image, so
-// points that are not pixels of the image count. For the camera above, whose
-// image has no valid pixel at all, it reports 177.8 deg. Enable once fixed
-// (the same holds for the horizontal span when cy is outside the image).
-TEST(FieldOfView, DISABLED_VerticalSpanIgnoresPointsOutsideImage) {
+// The vertical span is scanned along the image column nearest the principal
+// point, so points that are not pixels of the image never count: for the
+// camera above, whose image has no valid pixel at all, it once reported
+// 177.8 deg (scanned along u = cx, outside the image). The same for the
+// horizontal span when cy lies outside the image.
+TEST(FieldOfView, VerticalSpanIgnoresPointsOutsideImage) {
   const auto cam = CameraModel::unified(makeIntrinsics(100, 100, 50, 50, 100, 100), 2.0).cropped(1050, 0, 100, 100);
   EXPECT_EQ(computeFieldOfView(cam).vertical_deg, 0.0);
   // Transposed: principal point below the image, the horizontal span.

@@ -29,12 +29,15 @@ double spanAlong(const CameraModel& model, int count, PixelAt pixel_at, AngleOf 
 
 FieldOfView computeFieldOfView(const CameraModel& model) {
   const auto& p = model.params();
+  // The row and column through the principal point, kept inside the image.
+  const double row = std::clamp(p.cy, 0.0, double(model.height() - 1));
+  const double col = std::clamp(p.cx, 0.0, double(model.width() - 1));
   FieldOfView fov;
   fov.horizontal_deg = spanAlong(
-      model, model.width(), [&](int i) { return Eigen::Vector2d(i, p.cy); },
+      model, model.width(), [&](int i) { return Eigen::Vector2d(i, row); },
       [](const Eigen::Vector3d& r) { return std::atan2(r.x(), r.z()); });
   fov.vertical_deg = spanAlong(
-      model, model.height(), [&](int i) { return Eigen::Vector2d(p.cx, i); },
+      model, model.height(), [&](int i) { return Eigen::Vector2d(col, i); },
       [](const Eigen::Vector3d& r) { return std::atan2(r.y(), r.z()); });
   double max_angle = 0.0;
   const int step = 2;

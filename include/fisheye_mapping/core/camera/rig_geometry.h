@@ -7,8 +7,11 @@
 namespace fisheye_mapping {
 
 struct FieldOfView {
-  double horizontal_deg = 0.0;    // between the extreme valid rays of the centre row
-  double vertical_deg = 0.0;      // between the extreme valid rays of the centre column
+  // Between the extreme valid rays of the image row (column) through the
+  // principal point; the nearest one of the image when the principal point
+  // lies outside it (a crop), so only the image's own pixels count.
+  double horizontal_deg = 0.0;
+  double vertical_deg = 0.0;
   double max_off_axis_deg = 0.0;  // largest angle of any valid pixel's ray to the axis
 };
 
