@@ -37,6 +37,16 @@ class ScratchDir {
   std::string path_;
 };
 
+// A fresh directory inside a program-wide scratch directory made with
+// `prefix` at the first call (removed when the program ends): 0, 1, 2, ...
+inline std::string freshScratchSubdir(const std::string& prefix) {
+  static const ScratchDir root(prefix);
+  static int n = 0;
+  const std::string d = root.path() + "/" + std::to_string(n++);
+  std::filesystem::create_directories(d);
+  return d;
+}
+
 }  // namespace test
 }  // namespace fisheye_mapping
 

@@ -223,8 +223,11 @@ TEST(ParamDeclarations, ValuesOutsideTheRangeOrChoicesAreRefusedNamingTheParamet
         putMap(m, i.name, v);
         const std::string msg = refusal([&] { table.read(m, C{}); });
         EXPECT_EQ(msg.rfind(i.name + ":", 0), 0u) << i.name << " = " << fm::formatParamValue(v) << ": " << msg;
-        if (i.kind == fm::ParamKind::Enum)
-          for (const auto& ch : i.choices) EXPECT_TRUE(contains(msg, ch)) << msg;
+        if (i.kind == fm::ParamKind::Enum) {
+          for (const auto& ch : i.choices) {
+            EXPECT_TRUE(contains(msg, ch)) << msg;
+          }
+        }
         ++checked;
       }
     }
@@ -271,7 +274,9 @@ TEST(ParamDeclarations, EveryDeclarationIsDescribedAndItsDefaultIsValid) {
     EXPECT_NO_THROW(table.check(C{})) << table.section();
     for (const auto& i : table.documented()) {
       EXPECT_GT(i.description.size(), 10u) << i.name;
-      if (i.kind == fm::ParamKind::Enum) EXPECT_GE(i.choices.size(), 2u) << i.name;
+      if (i.kind == fm::ParamKind::Enum) {
+        EXPECT_GE(i.choices.size(), 2u) << i.name;
+      }
       if (i.name == "time_reset_threshold") {
         EXPECT_EQ(i.range.text(), ">= 0") << table.section();
         EXPECT_TRUE(contains(i.description, "0: never")) << table.section() << ": " << i.description;
@@ -415,7 +420,9 @@ void checkCfg(const std::string& cfg, const Tables&... tables) {
         EXPECT_EQ(p.edit_method, "") << p.name;
       }
       if (i.kind == fm::ParamKind::Int || i.kind == fm::ParamKind::Double) {
-        if (!i.optional) EXPECT_DOUBLE_EQ(*numberIn(defaults, p.name), asNumber(i.default_value)) << p.name;
+        if (!i.optional) {
+          EXPECT_DOUBLE_EQ(*numberIn(defaults, p.name), asNumber(i.default_value)) << p.name;
+        }
         const double lo = i.kind == fm::ParamKind::Int ? double(INT_MIN) : -std::numeric_limits<double>::infinity();
         const double hi = i.kind == fm::ParamKind::Int ? double(INT_MAX) : std::numeric_limits<double>::infinity();
         EXPECT_EQ(*numberIn(mins, p.name), lo) << p.name << ": a range in the .cfg clamps before the node checks";
@@ -423,11 +430,15 @@ void checkCfg(const std::string& cfg, const Tables&... tables) {
       }
       if (i.kind == fm::ParamKind::Bool) {
         for (const auto& b : defaults.bools)
-          if (b.name == p.name) EXPECT_EQ(bool(b.value), std::get<bool>(i.default_value)) << p.name;
+          if (b.name == p.name) {
+            EXPECT_EQ(bool(b.value), std::get<bool>(i.default_value)) << p.name;
+          }
       }
       if (i.kind == fm::ParamKind::String || i.kind == fm::ParamKind::Enum) {
         for (const auto& s : defaults.strs)
-          if (s.name == p.name) EXPECT_EQ(s.value, std::get<std::string>(i.default_value)) << p.name;
+          if (s.name == p.name) {
+            EXPECT_EQ(s.value, std::get<std::string>(i.default_value)) << p.name;
+          }
       }
     }
   }

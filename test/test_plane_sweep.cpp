@@ -994,7 +994,9 @@ TEST(PlaneSweepAccuracy, DepthMatchesTheRenderedTruthAndFiltersHelp) {
   for (int v = 0; v < r.depth.rows; ++v) {
     for (int u = 0; u < r.depth.cols; ++u) {
       const float d = r.depth.at<float>(v, u);
-      if (std::isfinite(d)) ASSERT_EQ(d, r.raw_depth.at<float>(v, u));
+      if (std::isfinite(d)) {
+        ASSERT_EQ(d, r.raw_depth.at<float>(v, u));
+      }
     }
   }
 }

@@ -50,13 +50,7 @@ std::vector<Eigen::Isometry3d> orbit() {
 
 // A fresh directory inside the program's scratch directory (removed when
 // the program ends).
-std::string tempDir() {
-  static const fisheye_mapping::test::ScratchDir root("/tmp/fm_tsdf_test_");
-  static int n = 0;
-  const std::string d = root.path() + "/" + std::to_string(n++);
-  std::filesystem::create_directories(d);
-  return d;
-}
+std::string tempDir() { return fisheye_mapping::test::freshScratchSubdir("/tmp/fm_tsdf_test_"); }
 
 class Tsdf : public ::testing::Test {
  protected:

@@ -124,13 +124,7 @@ Snapshot snapshot(const TsdfMap& map) {
 
 // A fresh directory inside the program's scratch directory (removed when
 // the program ends).
-std::string tempDir() {
-  static const fisheye_mapping::test::ScratchDir root("/tmp/fm_map_file_test_");
-  static int n = 0;
-  const std::string d = root.path() + "/" + std::to_string(n++);
-  std::filesystem::create_directories(d);
-  return d;
-}
+std::string tempDir() { return fisheye_mapping::test::freshScratchSubdir("/tmp/fm_map_file_test_"); }
 
 std::string readBytes(const std::string& path) {
   std::ifstream in(path, std::ios::binary);

@@ -3,11 +3,24 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <tuple>
 
 namespace fisheye_mapping {
+namespace {
+
+// The camera's viewing direction in the world's horizontal plane (unit), none
+// when it looks nearly straight up or down.
+std::optional<Eigen::Vector3d> horizontalViewDirection(const Eigen::Isometry3d& T_W_C) {
+  Eigen::Vector3d f = T_W_C.linear().col(2);
+  f.z() = 0.0;
+  if (f.norm() < 0.1) return std::nullopt;
+  return Eigen::Vector3d(f.normalized());
+}
+
+}  // namespace
 
 const char* toString(VehicleMotion m) {
   switch (m) {
@@ -86,12 +99,10 @@ bool VehicleMotionTracker::alongHeading(const Track& tr, const Eigen::Isometry3d
   Eigen::Vector2d velocity;
   double stt, sigma;
   if (!tr.fit(&velocity, &stt, &sigma)) return false;
-  const Eigen::Vector3d f = T_W_C.linear().col(2);
-  Eigen::Vector2d fwd(f.x(), f.y());
-  if (fwd.norm() < 0.1) return false;  // looking up or down: no heading
-  fwd.normalize();
+  const std::optional<Eigen::Vector3d> fwd = horizontalViewDirection(T_W_C);
+  if (!fwd) return false;  // looking up or down: no heading
   // The velocity across the heading: less than half the moving speed.
-  return std::abs(fwd.x() * velocity.y() - fwd.y() * velocity.x()) < 0.5 * config_.moving_speed;
+  return std::abs(fwd->x() * velocity.y() - fwd->y() * velocity.x()) < 0.5 * config_.moving_speed;
 }
 
 std::vector<Eigen::AlignedBox3d> VehicleMotionTracker::ghostRegions() const {
@@ -143,10 +154,9 @@ std::optional<Eigen::Vector3d> VehicleMotionTracker::place(const Detection& box,
   // camera (the 20th percentile), across it and in height the median: the
   // near face stays put while more of the flank comes into view as the ego
   // drives up (the median slid forward with it).
-  Eigen::Vector3d fwd = T_W_C.linear().col(2);
-  fwd.z() = 0.0;
-  const bool level = fwd.norm() > 0.1;
-  fwd = level ? Eigen::Vector3d(fwd.normalized()) : Eigen::Vector3d::UnitX();
+  const std::optional<Eigen::Vector3d> view = horizontalViewDirection(T_W_C);
+  const bool level = view.has_value();
+  const Eigen::Vector3d fwd = level ? *view : Eigen::Vector3d::UnitX();
   const Eigen::Vector3d side(-fwd.y(), fwd.x(), 0.0);
   std::vector<double> as, ls, zs;
   for (const auto& p : pts) {
@@ -334,10 +344,8 @@ std::vector<VehicleMotionTracker::Decision> VehicleMotionTracker::update(
             // horizontal viewing direction: the body's middle lies half a
             // car's length (2.25 m) beyond it, which the carved region is
             // centred on.
-            Eigen::Vector3d fwd = T_W_C->linear().col(2);
-            fwd.z() = 0.0;
             tr.parked_centre = *pos[i];
-            if (fwd.norm() > 0.1) tr.parked_centre += 2.25 * fwd.normalized();
+            if (const auto fwd = horizontalViewDirection(*T_W_C)) tr.parked_centre += 2.25 * *fwd;
           }
         }
       }
