@@ -909,6 +909,67 @@ TEST_P(PlaneSweepStreet, CoarseToFineCropIsAsAccurateAsTheFullSearch) {
 INSTANTIATE_TEST_SUITE_P(Products, PlaneSweepStreet, ::testing::Values("opencl", "native"),
                          [](const ::testing::TestParamInfo<std::string>& info) { return info.param; });
 
+// The sky's fattened edges under an overcast sky as contrasted as a real one
+// (issue 26: under 0.5 % of the sky's pixels keep a depth): the default rig at
+// full resolution, multi-scale, config/vehicle.yaml's filters and the
+// infinity filter. The band dropped beside the sky is twice a half-resolution
+// window's reach (14 px); with the reach alone (7 px) roofs kept a rim of
+// the sky's pixels at their depth (1.15 % of a cloudy sky on depth_eval's
+// urban drive). Surfaces keep their depth: coverage within 20 m as without
+// the filter, to half a point.
+TEST(PlaneSweepInfinity, CloudySkyKeepsNoDepthAtRoofEdges) {
+  const fm::Rig rig =
+      fm::loadKalibrRig(FM_CONFIG_DIR "/rig/default_camchain.yaml", FM_CONFIG_DIR "/rig/default_mount.yaml");
+  fm::synth::WorldConfig wc;
+  wc.seed = 4;
+  wc.route_length = 120;
+  wc.overcast = true;
+  wc.clouds = fm::synth::WorldConfig::kOvercastClouds;
+  const fm::synth::World world(wc);
+  const double t = 2.0;
+  std::vector<cv::Mat> images;
+  cv::Mat truth;
+  for (size_t c = 0; c < rig.cameras.size(); ++c) {
+    const auto& cam = rig.cameras[c];
+    auto frame = world.render(cam.model, fm::pixelRays(cam.model), world.egoPose(t) * cam.T_base_cam, t, 7 + c);
+    images.push_back(frame.image);
+    if (c == 0) truth = frame.depth;
+  }
+  std::vector<fm::SweepView> supports;
+  for (int i = 1; i < 5; ++i) supports.push_back(fm::rigSweepView(rig, i, 0, images[i]));
+  const Eigen::Isometry3d T_base_ref = rig.cameras[0].T_base_cam;
+  auto run = [&](bool infinity) {
+    fm::PlaneSweepConfig c;  // multi-scale, 7 x 7 at half resolution
+    c.filters.uniqueness = false;  // config/vehicle.yaml
+    c.filters.infinity = infinity;
+    fm::PlaneSweep sweep(c);
+    return sweep.compute(fm::rigSweepView(rig, 0, 0, images[0]), supports, &T_base_ref).depth;
+  };
+  const cv::Mat with = run(true), without = run(false);
+  int sky = 0, sky_with = 0, sky_without = 0, near = 0, near_with = 0, near_without = 0;
+  for (int v = 0; v < truth.rows; ++v) {
+    for (int u = 0; u < truth.cols; ++u) {
+      Eigen::Vector3d ray;
+      if (!rig.cameras[0].model.unproject(Eigen::Vector2d(u + 0.5, v + 0.5), &ray)) continue;
+      const float d = truth.at<float>(v, u);
+      const bool w = std::isfinite(with.at<float>(v, u)), wo = std::isfinite(without.at<float>(v, u));
+      if (!std::isfinite(d)) {
+        ++sky, sky_with += w, sky_without += wo;
+      } else if (d <= 20.0f) {
+        ++near, near_with += w, near_without += wo;
+      }
+    }
+  }
+  ASSERT_GT(sky, 20000);
+  ASSERT_GT(near, 100000);
+  std::cout << "sky pixels with a depth: " << sky_with << " of " << sky << " with the infinity filter, " << sky_without
+            << " without; coverage within 20 m " << double(near_with) / near << " / " << double(near_without) / near
+            << "\n";
+  EXPECT_GT(sky_without, 0.01 * sky) << "the cloudy sky no longer keeps depth without the filter: the test is moot";
+  EXPECT_LT(sky_with, 0.005 * sky);
+  EXPECT_GT(near_with, near_without - 0.005 * near);
+}
+
 TEST(PlaneSweepBackend, AutoTakesTheGpuElseTheNativeCpuBackend) {
   fm::PlaneSweepConfig c;
   ASSERT_EQ(c.backend, fm::SweepBackendType::Auto);

@@ -440,9 +440,14 @@ DepthResult PlaneSweep::compute(const SweepView& ref, const std::vector<SweepVie
   result.depth = applyDepthFilters(config_.filters, result.raw_depth, result.cost, result.uniqueness, result.texture,
                                    result.infinity_cost);
   if (config_.filters.infinity && !result.infinity_cost.empty()) {
-    // The sky's edges: the half resolution's windows reach window_half
-    // half-resolution pixels, twice as many at full resolution.
-    const int band = 2 * (config_.window_half / 2) + 1;
+    // The sky's edges: a half-resolution window reaches window_half / 2
+    // half-resolution pixels, 2 (window_half / 2) + 1 at full resolution, so
+    // the fattened depth lies within that reach of the true edge; the region
+    // without parallax begins no nearer than the same reach beyond it (its
+    // windows do not see the edge): the band is twice the reach (14 px with
+    // the default 7 x 7; the reach alone, 7 px, left 1.15 % of a cloudy sky's
+    // pixels with a depth on the urban drive, 0.11 % with twice it).
+    const int band = 2 * (2 * (config_.window_half / 2) + 1);
     result.depth.setTo(NAN, noParallaxEdges(result.depth, result.cost, result.infinity_cost,
                                             config_.filters.texture ? result.texture : cv::Mat(),
                                             config_.filters.min_texture_snr,
