@@ -570,10 +570,15 @@ int main(int argc, char** argv) {
       const double sweep_total = std::accumulate(t_sweep.begin(), t_sweep.end(), 0.0);
       std::snprintf(buf, sizeof(buf),
                     "\nself-calibration: %d updates over %d frame sets, %.0f ms per update, %.1f ms per frame set "
-                    "on average (%.1f %% of the depth stage's time)%s%s\n\n",
+                    "on average (%.1f %% of the depth stage's time; per update %.0f ms finding the matches, %.0f ms "
+                    "tracking the metric matches, %.0f ms the fits and checks)%s%s\n\n",
                     cal->updates(), cal->frameSets(), cal->updates() ? cal->totalMs() / cal->updates() : 0.0,
                     cal->frameSets() ? cal->totalMs() / cal->frameSets() : 0.0,
                     sweep_total > 0 ? 100.0 * cal->totalMs() / sweep_total : 0.0,
+                    cal->updates() ? cal->totalMatchMs() / cal->updates() : 0.0,
+                    cal->updates() ? cal->totalMetricMs() / cal->updates() : 0.0,
+                    cal->updates() ? (cal->totalMs() - cal->totalMatchMs() - cal->totalMetricMs()) / cal->updates()
+                                   : 0.0,
                     cal->startError().empty() ? "" : "; ", cal->startError().c_str());
       md << buf;
       md << "| camera | correction deg | rotation vector deg (camera frame) | residual deg | inliers | updates | "

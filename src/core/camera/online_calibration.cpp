@@ -392,6 +392,7 @@ void OnlineRigCalibrator::update(const std::vector<cv::Mat>& grey) {
   try {
     found = matcher_.match(rig_, ref_, usable, nullptr, band);
     last_match_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_match).count();
+    total_match_ms_ += last_match_ms_;
   } catch (const std::exception& e) {
     for (int c : supports_) state_[c].warn = true, state_[c].status = std::string("matching failed: ") + e.what();
     return;
@@ -417,6 +418,7 @@ void OnlineRigCalibrator::update(const std::vector<cv::Mat>& grey) {
         metric = metricMatches(grey[ref_], found, T_cur_prev);
         last_metric_ms_ =
             std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_metric).count();
+        total_metric_ms_ += last_metric_ms_;
       }
     }
   }

@@ -170,6 +170,9 @@ class OnlineRigCalibrator {
   const std::string& startError() const { return start_error_; }
   const SelfCalibrationConfig& config() const { return config_; }
   double totalMs() const { return total_ms_; }
+  // Of totalMs(): finding the matches, and tracking / triangulating the metric matches.
+  double totalMatchMs() const { return total_match_ms_; }
+  double totalMetricMs() const { return total_metric_ms_; }
   // Whether any correction has been applied since the start (or the start file).
   bool changed() const { return changed_; }
 
@@ -230,6 +233,7 @@ class OnlineRigCalibrator {
   int next_due_ = 0;  // the frame set of the next update (besides the second set)
   int interval_ = 0;
   double last_ms_ = 0.0, total_ms_ = 0.0, last_call_ms_ = 0.0, last_match_ms_ = 0.0, last_metric_ms_ = 0.0;
+  double total_match_ms_ = 0.0, total_metric_ms_ = 0.0;
   std::string start_error_;
   bool changed_ = false;
 };
