@@ -54,6 +54,32 @@ float costOf(const std::vector<float>& w, const std::vector<float>& r) {
                           static_cast<float>(swr), static_cast<float>(mean_r), static_cast<float>(std_r));
 }
 
+// The rig's images of the street world of seed 4 at t = 2 s (camera c with
+// noise seed 7 + c) and cam0's true range; `overcast`: the cloudy sky.
+struct StreetFrame {
+  std::vector<cv::Mat> images;
+  cv::Mat truth;
+};
+StreetFrame renderStreet(const fm::Rig& rig, bool overcast) {
+  fm::synth::WorldConfig wc;
+  wc.seed = 4;
+  wc.route_length = 120;
+  if (overcast) {
+    wc.overcast = true;
+    wc.clouds = fm::synth::WorldConfig::kOvercastClouds;
+  }
+  const fm::synth::World world(wc);
+  const double t = 2.0;
+  StreetFrame out;
+  for (size_t c = 0; c < rig.cameras.size(); ++c) {
+    const auto& cam = rig.cameras[c];
+    auto frame = world.render(cam.model, fm::pixelRays(cam.model), world.egoPose(t) * cam.T_base_cam, t, 7 + c);
+    out.images.push_back(frame.image);
+    if (c == 0) out.truth = frame.depth;
+  }
+  return out;
+}
+
 }  // namespace
 
 TEST(PlaneSweepShared, ZnccCostMatchesDefinition) {
@@ -920,21 +946,9 @@ INSTANTIATE_TEST_SUITE_P(Products, PlaneSweepStreet, ::testing::Values("opencl",
 TEST(PlaneSweepInfinity, CloudySkyKeepsNoDepthAtRoofEdges) {
   const fm::Rig rig =
       fm::loadKalibrRig(FM_CONFIG_DIR "/rig/default_camchain.yaml", FM_CONFIG_DIR "/rig/default_mount.yaml");
-  fm::synth::WorldConfig wc;
-  wc.seed = 4;
-  wc.route_length = 120;
-  wc.overcast = true;
-  wc.clouds = fm::synth::WorldConfig::kOvercastClouds;
-  const fm::synth::World world(wc);
-  const double t = 2.0;
-  std::vector<cv::Mat> images;
-  cv::Mat truth;
-  for (size_t c = 0; c < rig.cameras.size(); ++c) {
-    const auto& cam = rig.cameras[c];
-    auto frame = world.render(cam.model, fm::pixelRays(cam.model), world.egoPose(t) * cam.T_base_cam, t, 7 + c);
-    images.push_back(frame.image);
-    if (c == 0) truth = frame.depth;
-  }
+  const StreetFrame street = renderStreet(rig, true);
+  const std::vector<cv::Mat>& images = street.images;
+  const cv::Mat& truth = street.truth;
   std::vector<fm::SweepView> supports;
   for (int i = 1; i < 5; ++i) supports.push_back(fm::rigSweepView(rig, i, 0, images[i]));
   const Eigen::Isometry3d T_base_ref = rig.cameras[0].T_base_cam;
@@ -991,19 +1005,9 @@ TEST(PlaneSweepAccuracy, DepthMatchesTheRenderedTruthAndFiltersHelp) {
   // The default rig's five cameras at half resolution (512x272), on a street.
   fm::Rig rig = fm::loadKalibrRig(FM_CONFIG_DIR "/rig/default_camchain.yaml", FM_CONFIG_DIR "/rig/default_mount.yaml");
   for (auto& c : rig.cameras) c.model = c.model.scaled(0.5, 512, 272);
-  fm::synth::WorldConfig wc;
-  wc.seed = 4;
-  wc.route_length = 120;
-  const fm::synth::World world(wc);
-  const double t = 2.0;
-  std::vector<cv::Mat> images;
-  cv::Mat truth;
-  for (size_t c = 0; c < rig.cameras.size(); ++c) {
-    const auto& cam = rig.cameras[c];
-    auto frame = world.render(cam.model, fm::pixelRays(cam.model), world.egoPose(t) * cam.T_base_cam, t, 7 + c);
-    images.push_back(frame.image);
-    if (c == 0) truth = frame.depth;
-  }
+  const StreetFrame street = renderStreet(rig, false);
+  const std::vector<cv::Mat>& images = street.images;
+  const cv::Mat& truth = street.truth;
   fm::PlaneSweepConfig c;
   c.resolution = fm::SweepResolution::Full;
   c.min_parallax_px = 0.1;
