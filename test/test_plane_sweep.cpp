@@ -327,6 +327,62 @@ TEST(DepthReconfigure, EachFilterByHand) {
   EXPECT_TRUE(std::isnan(fm::applyDepthFilters(f, raw, cost, ratio).at<float>(3, 3)));
 }
 
+// alpha_by_horizon: the cost threshold follows a mask of the pixels below the
+// horizon instead of split_row (by hand: cost 0.2 everywhere, alpha 0.05 /
+// 0.3; the mask's left half is below).
+TEST(DepthReconfigure, AlphaFollowsTheHorizonMaskByHand) {
+  fm::DepthFilterConfig f;
+  f.texture = f.uniqueness = f.consistency = false;
+  const cv::Mat raw(4, 4, CV_32FC1, cv::Scalar(5.0f)), cost(4, 4, CV_32FC1, cv::Scalar(0.2f)),
+      ratio(4, 4, CV_32FC1, cv::Scalar(0.5f));
+  const cv::Mat by_row = fm::applyDepthFilters(f, raw, cost, ratio);
+  cv::Mat below(4, 4, CV_8UC1, cv::Scalar(0));
+  below.colRange(0, 2).setTo(255);
+  const cv::Mat by_mask = fm::applyDepthFilters(f, raw, cost, ratio, cv::Mat(), cv::Mat(), below);
+  for (int v = 0; v < 4; ++v) {
+    for (int u = 0; u < 4; ++u) {
+      EXPECT_EQ(std::isfinite(by_row.at<float>(v, u)), v >= 2) << u << "," << v;
+      EXPECT_EQ(std::isfinite(by_mask.at<float>(v, u)), u < 2) << u << "," << v;
+    }
+  }
+}
+
+// belowHorizon against the pinhole's horizon: a camera pitched down by 20 deg
+// sees the horizon at row cy - f tan(20 deg) (93.9 of 480 rows), so most of
+// its upper half looks below it; level, the horizon is row cy.
+TEST(PlaneSweepFilters, BelowHorizonFollowsTheMount) {
+  fm::Intrinsics in;
+  in.width = 640;
+  in.height = 480;
+  in.fx = in.fy = 400.0;
+  in.cx = 319.5;
+  in.cy = 239.5;
+  const fm::CameraModel cam = fm::CameraModel::pinhole(in);
+  const std::vector<Eigen::Vector3f> r = fm::pixelRays(cam);
+  std::vector<float> rays(3 * r.size(), 0.0f);
+  for (size_t i = 0; i < r.size(); ++i) {
+    if (r[i].allFinite()) for (int a = 0; a < 3; ++a) rays[3 * i + a] = r[i][a];
+  }
+  // Optical frame (x right, y down, z forward) in base (x forward, y left, z up), then pitched down.
+  Eigen::Matrix3d level;
+  level.col(0) = -Eigen::Vector3d::UnitY();
+  level.col(1) = -Eigen::Vector3d::UnitZ();
+  level.col(2) = Eigen::Vector3d::UnitX();
+  for (const double pitch_deg : {0.0, 20.0}) {
+    Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+    T.linear() = Eigen::AngleAxisd(pitch_deg * M_PI / 180.0, Eigen::Vector3d::UnitY()).toRotationMatrix() * level;
+    T.translation() = Eigen::Vector3d(1.0, 0.0, 1.5);
+    const cv::Mat below = fm::belowHorizon(rays, in.width, in.height, T);
+    const double horizon = in.cy - in.fy * std::tan(pitch_deg * M_PI / 180.0);
+    for (int v = 0; v < in.height; ++v) {
+      // Pixel centres: row v's centre is at v (pixelRays), the horizon between rows.
+      if (std::abs(v - horizon) < 1.0) continue;
+      for (const int u : {0, 320, 639}) EXPECT_EQ(below.at<uint8_t>(v, u) != 0, v > horizon) << pitch_deg << ": " << u << "," << v;
+    }
+  }
+  EXPECT_THROW(fm::belowHorizon(rays, 320, 480, Eigen::Isometry3d::Identity()), std::invalid_argument);
+}
+
 TEST(PlaneSweepViews, SmallBaselineAndNoOverlapAreDropped) {
   fm::PlaneSweepConfig config;
   const fm::CameraModel cam = smallFisheye(1024, 544);

@@ -850,7 +850,10 @@ fm::DepthResult vchargeDepth(fm::PlaneSweep& sweep, const VchargeSequence& s, in
     if (i == ref) continue;
     supports.push_back({s.names[i], model, s.T_W_C[ref].inverse() * s.T_W_C[i], s.images[i], cv::Mat()});
   }
-  return sweep.compute(rv, supports, nullptr);
+  // The camera's mount: which pixels look below the horizon (alpha_by_horizon);
+  // no ground planes come of it (ground_planes 0: the ground's height is not known).
+  const Eigen::Isometry3d T_base_ref = s.rig.cameras[0].T_base_cam;
+  return sweep.compute(rv, supports, &T_base_ref);
 }
 
 // Side by side, at half size: reference | PlaneSweepLib (when in --data) |

@@ -4,6 +4,8 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <stdexcept>
+#include <string>
 #include <vector>
 
 #include <opencv2/imgproc.hpp>
@@ -210,8 +212,23 @@ cv::Mat texturelessRegions(const cv::Mat& image, const cv::Mat& valid, double mi
   return region;
 }
 
+cv::Mat belowHorizon(const std::vector<float>& rays, int w, int h, const Eigen::Isometry3d& T_base_ref) {
+  if (rays.size() != 3 * static_cast<size_t>(w) * h)
+    throw std::invalid_argument("belowHorizon: " + std::to_string(rays.size()) + " ray components for a " +
+                                std::to_string(w) + "x" + std::to_string(h) + " image");
+  // The base frame's up direction in the camera frame: R^T e_z.
+  const Eigen::Vector3f up = T_base_ref.linear().row(2).transpose().cast<float>();
+  cv::Mat below(h, w, CV_8UC1);
+  uint8_t* b = below.ptr<uint8_t>();
+  for (size_t i = 0; i < static_cast<size_t>(w) * h; ++i) {
+    b[i] = up.x() * rays[3 * i] + up.y() * rays[3 * i + 1] + up.z() * rays[3 * i + 2] < 0.0f ? 255 : 0;
+  }
+  return below;
+}
+
 cv::Mat applyDepthFilters(const DepthFilterConfig& config, const cv::Mat& raw, const cv::Mat& cost,
-                          const cv::Mat& ratio, const cv::Mat& texture, const cv::Mat& infinity) {
+                          const cv::Mat& ratio, const cv::Mat& texture, const cv::Mat& infinity,
+                          const cv::Mat& below) {
   cv::Mat depth = raw.clone();
   const bool use_infinity = config.infinity && !infinity.empty();
   const float margin = static_cast<float>(config.infinity_margin);
@@ -225,8 +242,11 @@ cv::Mat applyDepthFilters(const DepthFilterConfig& config, const cv::Mat& raw, c
     const float* q = ratio.ptr<float>(v);
     const float* t = use_texture ? texture.ptr<float>(v) : nullptr;
     const float* inf = use_infinity ? infinity.ptr<float>(v) : nullptr;
-    const float alpha = static_cast<float>(v < split ? config.alpha_upper : config.alpha_lower);
+    const float row_alpha = static_cast<float>(v < split ? config.alpha_upper : config.alpha_lower);
+    const uint8_t* b = below.empty() ? nullptr : below.ptr<uint8_t>(v);
+    const float a_up = static_cast<float>(config.alpha_upper), a_low = static_cast<float>(config.alpha_lower);
     for (int u = 0; u < w; ++u) {
+      const float alpha = b ? (b[u] ? a_low : a_up) : row_alpha;
       if (t && !(t[u] >= min_snr)) d[u] = NAN;
       if (config.cost && !(c[u] <= alpha)) d[u] = NAN;
       if (config.uniqueness && !(q[u] <= config.max_ratio)) d[u] = NAN;

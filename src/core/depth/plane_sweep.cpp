@@ -437,8 +437,12 @@ DepthResult PlaneSweep::compute(const SweepView& ref, const std::vector<SweepVie
   }
   result.sweep_ms = msSince(t0);
   const auto t1 = std::chrono::steady_clock::now();
+  // Below the horizon: the base frame's horizontal plane through the camera.
+  cv::Mat below;
+  if (config_.filters.alpha_by_horizon && T_base_ref && !frame.used.empty())
+    below = belowHorizon(rays_[kSlotFull].rays, W, H, *T_base_ref);
   result.depth = applyDepthFilters(config_.filters, result.raw_depth, result.cost, result.uniqueness, result.texture,
-                                   result.infinity_cost);
+                                   result.infinity_cost, below);
   if (config_.filters.infinity && !result.infinity_cost.empty()) {
     // The sky's edges: a half-resolution window reaches window_half / 2
     // half-resolution pixels, 2 (window_half / 2) + 1 at full resolution, so

@@ -81,11 +81,17 @@ const ParamTable<DepthFilterConfig>& DepthFilterConfig::params() {
         .flag("filter_cost", [](C& c) -> bool& { return c.cost; }, "Drop pixels whose best matching cost exceeds alpha",
               kRun)
         .number("alpha_upper", [](C& c) -> double& { return c.alpha_upper; }, R::between(0, 1), "",
-                "Cost threshold for the rows above split_row", kRun)
+                "Cost threshold above the horizon (the rows above split_row without a mount)", kRun)
         .number("alpha_lower", [](C& c) -> double& { return c.alpha_lower; }, R::between(0, 1), "",
-                "Cost threshold for the rows below split_row", kRun)
+                "Cost threshold below the horizon (the rows below split_row without a mount)", kRun)
+        .flag("alpha_by_horizon", [](C& c) -> bool& { return c.alpha_by_horizon; },
+              "With the camera's mount: alpha_lower where the ray points below the base frame's horizontal "
+              "plane (the ground, whatever the camera's pitch); false: split_row",
+              kRun)
         .number("split_row", [](C& c) -> double& { return c.split_row; }, R::between(0, 1), "",
-                "Boundary between the upper and lower part, fraction of the image height", kRun)
+                "Boundary between the upper and lower part without a mount (or alpha_by_horizon false), fraction "
+                "of the image height",
+                kRun)
         .flag("filter_uniqueness", [](C& c) -> bool& { return c.uniqueness; },
               "Drop pixels whose best / second-best cost ratio exceeds max_ratio", kRun)
         .number("max_ratio", [](C& c) -> double& { return c.max_ratio; }, R::aboveUpTo(0, 1), "",

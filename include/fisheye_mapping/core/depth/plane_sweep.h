@@ -83,9 +83,16 @@ struct DepthFilterConfig {
   double min_texture_snr = 1.5;
   double min_noise_std = 1.0 / 255.0;  // image values in [0, 1]: one 8-bit step
   bool cost = true;              // drop best cost > alpha
-  double alpha_upper = 0.05;     // rows above split_row * height
-  double alpha_lower = 0.3;      // rows below
+  double alpha_upper = 0.05;     // above the horizon (rows above split_row * height without a mount)
+  double alpha_lower = 0.3;      // below it: the ground, slanted to the camera
   double split_row = 0.5;        // fraction of the image height
+  // With the camera's mount known (PlaneSweep::compute's T_base_ref): a
+  // pixel whose ray points below the base frame's horizontal plane gets
+  // alpha_lower, others alpha_upper, whatever the camera's pitch (a camera
+  // pitched down sees road in its upper rows, a fisheye's horizon is a
+  // curve); split_row when off or without a mount. Off by default (the
+  // paper's split): see docs/depth.md#alpha-by-the-horizon.
+  bool alpha_by_horizon = false;
   bool uniqueness = true;        // drop best / second-best cost > max_ratio
   double max_ratio = 0.9;
   bool consistency = true;       // drop when < delta of the window is within gamma
@@ -247,9 +254,17 @@ cv::Mat toSweepImage(const cv::Mat& image, const std::string& what);
 // ratio, texture and infinity-cost images (texture / infinity may be empty:
 // no texture / infinity filter; NaN infinity cost: no test there); returns
 // the filtered range.
+// The pixels whose ray (`rays`: 3 per pixel of a w x h image, zero = none)
+// points below the base frame's horizontal plane (T_base_ref: the camera's
+// mount): CV_8UC1, 255 there (where alpha_lower applies with
+// alpha_by_horizon), 0 elsewhere and where there is no ray.
+cv::Mat belowHorizon(const std::vector<float>& rays, int w, int h, const Eigen::Isometry3d& T_base_ref);
+
+// `below` (CV_8UC1, may be empty): non-zero where alpha_lower applies
+// (below the horizon); empty: the rows below split_row.
 cv::Mat applyDepthFilters(const DepthFilterConfig& config, const cv::Mat& raw, const cv::Mat& cost,
                           const cv::Mat& ratio, const cv::Mat& texture = cv::Mat(),
-                          const cv::Mat& infinity = cv::Mat());
+                          const cv::Mat& infinity = cv::Mat(), const cv::Mat& below = cv::Mat());
 
 // The pixels of `depth` (filtered range) that lie within band_px of a large
 // region without depth of which a tenth is seen to match at infinity (a best
