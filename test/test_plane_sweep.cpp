@@ -345,6 +345,9 @@ TEST(DepthReconfigure, AlphaFollowsTheHorizonMaskByHand) {
       EXPECT_EQ(std::isfinite(by_mask.at<float>(v, u)), u < 2) << u << "," << v;
     }
   }
+  // A mask of another size is refused.
+  EXPECT_THROW(fm::applyDepthFilters(f, raw, cost, ratio, cv::Mat(), cv::Mat(), cv::Mat(3, 4, CV_8UC1, cv::Scalar(0))),
+               std::invalid_argument);
 }
 
 // belowHorizon against the pinhole's horizon: a camera pitched down by 20 deg

@@ -229,6 +229,10 @@ cv::Mat belowHorizon(const std::vector<float>& rays, int w, int h, const Eigen::
 cv::Mat applyDepthFilters(const DepthFilterConfig& config, const cv::Mat& raw, const cv::Mat& cost,
                           const cv::Mat& ratio, const cv::Mat& texture, const cv::Mat& infinity,
                           const cv::Mat& below) {
+  if (!below.empty() && (below.size() != raw.size() || below.type() != CV_8UC1))
+    throw std::invalid_argument("applyDepthFilters: the below-horizon mask is " + std::to_string(below.cols) + "x" +
+                                std::to_string(below.rows) + ", the depth " + std::to_string(raw.cols) + "x" +
+                                std::to_string(raw.rows) + " (CV_8UC1 of the same size needed)");
   cv::Mat depth = raw.clone();
   const bool use_infinity = config.infinity && !infinity.empty();
   const float margin = static_cast<float>(config.infinity_margin);

@@ -250,18 +250,19 @@ std::vector<FmSweepPlane> makeSweepPlanes(const PlaneSweepConfig& config, const 
 // unsupported types.
 cv::Mat toSweepImage(const cv::Mat& image, const std::string& what);
 
-// Applies the enabled filters to raw range (NaN invalid) given the best cost,
-// ratio, texture and infinity-cost images (texture / infinity may be empty:
-// no texture / infinity filter; NaN infinity cost: no test there); returns
-// the filtered range.
 // The pixels whose ray (`rays`: 3 per pixel of a w x h image, zero = none)
 // points below the base frame's horizontal plane (T_base_ref: the camera's
 // mount): CV_8UC1, 255 there (where alpha_lower applies with
-// alpha_by_horizon), 0 elsewhere and where there is no ray.
+// alpha_by_horizon), 0 elsewhere and where there is no ray. Throws
+// std::invalid_argument when rays has not 3 w h components.
 cv::Mat belowHorizon(const std::vector<float>& rays, int w, int h, const Eigen::Isometry3d& T_base_ref);
 
-// `below` (CV_8UC1, may be empty): non-zero where alpha_lower applies
-// (below the horizon); empty: the rows below split_row.
+// Applies the enabled filters to raw range (NaN invalid) given the best cost,
+// ratio, texture and infinity-cost images (texture / infinity may be empty:
+// no texture / infinity filter; NaN infinity cost: no test there); returns
+// the filtered range. `below` (CV_8UC1 of raw's size, may be empty):
+// non-zero where alpha_lower applies (below the horizon); empty: the rows
+// below split_row; another size throws std::invalid_argument.
 cv::Mat applyDepthFilters(const DepthFilterConfig& config, const cv::Mat& raw, const cv::Mat& cost,
                           const cv::Mat& ratio, const cv::Mat& texture = cv::Mat(),
                           const cv::Mat& infinity = cv::Mat(), const cv::Mat& below = cv::Mat());
