@@ -51,9 +51,13 @@ fm_build() {
   mkdir -p "$FM_WS/devel_$variant/lib/python3/dist-packages"
   # ROS's setup scripts read unset variables.
   set +u
+  # RelWithDebInfo with line tables only (-g1): backtraces, sanitizer reports and
+  # perf keep file and line; the compile takes about a quarter less than with
+  # full debug info (-g), the same code (docs/demo.md, first run).
   catkin_make -C "$FM_WS" --build "$FM_WS/build_$variant" \
     -DCATKIN_DEVEL_PREFIX="$FM_WS/devel_$variant" \
     -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+    "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O2 -g1 -DNDEBUG" "-DCMAKE_C_FLAGS_RELWITHDEBINFO=-O2 -g1 -DNDEBUG" \
     -DFM_SANITIZE="$sanitize" -DCATKIN_ENABLE_TESTING=ON -j2 "${@:2}" || rc=$?
   set -u
   exec {lock}>&-

@@ -129,6 +129,26 @@ TEST(DetectorEval, ScoreThresholdAndMinHeight) {
   EXPECT_NE(r.out.find("precision 0.667 recall 0.500 AP50 0.625 (TP 2 FP 1 FN 2)"), std::string::npos) << r.out;
 }
 
+TEST(DetectorEval, SweptThresholdsMatchRunsAtEachThreshold) {
+  // One run, three more thresholds: at 0.10 D5 counts (TP 2 FP 1, as the run at 0.1
+  // above); at 0.85 only D1 (TP 1, precision 1, recall 1/3); at 0.95 nothing
+  // (precision 1 by convention, recall 0). The operating line and AP stay those of
+  // the run without the sweep, although the detector now runs down to 0.1.
+  auto r = runTool(eval("--sweep-thresholds 0.1,0.85,0.95 --ap-threshold 0.3"));
+  ASSERT_EQ(r.status, 0) << r.out;
+  EXPECT_NE(r.out.find("at score 0.10: precision 0.667 recall 0.667 (TP 2 FP 1 FN 1)"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("at score 0.85: precision 1.000 recall 0.333 (TP 1 FP 0 FN 2)"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("at score 0.95: precision 1.000 recall 0.000 (TP 0 FP 0 FN 3)"), std::string::npos) << r.out;
+  // Without D5 in the ranking (AP from 0.3): D1 TP, D2 FP over 3 -> AP = 1/3.
+  EXPECT_NE(r.out.find("precision 0.500 recall 0.333 AP50 0.333 (TP 1 FP 1 FN 2)"), std::string::npos) << r.out;
+  // The same figures as separate runs at each threshold.
+  r = runTool(eval("--score-threshold 0.85"));
+  EXPECT_NE(r.out.find("precision 1.000 recall 0.333"), std::string::npos) << r.out;
+  r = runTool(eval("--sweep-thresholds 0.2,"));
+  EXPECT_EQ(r.status, 2);
+  EXPECT_NE(r.out.find("--sweep-thresholds needs a number"), std::string::npos) << r.out;
+}
+
 TEST(DetectorEval, UsageErrors) {
   auto r = runTool(std::string(FM_DETECTOR_EVAL) + " --help");
   EXPECT_EQ(r.status, 0);

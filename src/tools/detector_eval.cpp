@@ -12,7 +12,11 @@
 // descending score to the unmatched labelled box of highest IoU >= --iou,
 // counted boxes before ignored ones (scripts/finetune/metrics.py is the same rule).
 // Precision and recall are at the model's score threshold; AP (all-point
-// interpolated) ranks every detection down to --ap-threshold.
+// interpolated) ranks every detection down to --ap-threshold. --sweep-thresholds
+// adds a line per listed threshold from the same run (the detector runs once, at
+// the lowest score asked for: its greedy non-maximum suppression and the
+// matching by descending score give every higher threshold exactly what a run
+// at that threshold gives).
 //
 // Bad items (a label outside the image, an empty label file, an image of
 // another size than the folder's first, a class id beyond classes.txt, a
@@ -48,6 +52,8 @@ const char* kUsage =
     "  --iou T              IoU for a match (default 0.5)\n"
     "  --score-threshold S  precision / recall at this score (default: the model YAML's)\n"
     "  --ap-threshold S     lowest score ranked for AP (default 0.05, at most the score threshold)\n"
+    "  --sweep-thresholds LIST  also precision / recall at each of these comma-separated scores,\n"
+    "                       one line each ('at score S: precision P recall R (TP . FP . FN .)'), same run\n"
     "  --max-images N       evenly spaced subset of N images (default: all)\n"
     "  --dnn-target T       cpu | opencl | opencl_fp16 (default cpu)\n";
 
@@ -67,6 +73,7 @@ struct Options {
   std::vector<std::string> dirs;
   double min_height = 24, iou = 0.5, ap_threshold = 0.05;
   std::optional<double> score_threshold;
+  std::vector<double> sweep;
   long long max_images = 0;
   std::string dnn_target = "cpu";
 };
@@ -228,6 +235,7 @@ Options parse(int argc, char** argv) {
     else if (a == "--iou") o.iou = cli::parseDouble(a, next(), 0.01, 1);
     else if (a == "--score-threshold") o.score_threshold = cli::parseDouble(a, next(), 1e-4, 0.9999);
     else if (a == "--ap-threshold") o.ap_threshold = cli::parseDouble(a, next(), 1e-4, 0.9999);
+    else if (a == "--sweep-thresholds") o.sweep = cli::parseDoubleList(a, next(), 1e-4, 0.9999);
     else if (a == "--max-images") o.max_images = cli::parseInt(a, next(), 1, 100000000);
     else if (a == "--dnn-target") o.dnn_target = next();
     else if (!a.empty() && a[0] != '-') o.dirs.push_back(a);
@@ -270,7 +278,9 @@ int main(int argc, char** argv) {
     stage.dnn_target = fm::parseDnnTarget(o.dnn_target);
     fm::DetectorModelConfig model = stage.loadModel();
     const double operating = o.score_threshold.value_or(model.score_threshold);
-    model.score_threshold = float(std::min(operating, o.ap_threshold));
+    double lowest = std::min(operating, o.ap_threshold);
+    for (double t : o.sweep) lowest = std::min(lowest, t);
+    model.score_threshold = float(lowest);
     fm::Detector det(model, stage.device());
 
     std::vector<Scored> all;
@@ -306,9 +316,14 @@ int main(int argc, char** argv) {
                 << "\n";
       return 1;
     }
+    // TP and FP at score >= t; precision 1 with no detection, recall 1 with no vehicle.
+    const auto countAt = [&](double t, int* tp, int* fp) {
+      *tp = *fp = 0;
+      for (const auto& s : all)
+        if (s.score >= t) (s.tp ? *tp : *fp)++;
+    };
     int tp = 0, fp = 0;
-    for (const auto& s : all)
-      if (s.score >= operating) (s.tp ? tp : fp)++;
+    countAt(operating, &tp, &fp);
     const double precision = tp + fp ? double(tp) / (tp + fp) : 1.0;
     const double recall = n_gt ? double(tp) / n_gt : 1.0;
     std::printf("model %s (%s, input %dx%d, classes counted as vehicle: %zu moving)\n", o.config.c_str(),
@@ -316,8 +331,18 @@ int main(int argc, char** argv) {
     std::printf("images %d", used);
     if (problems.total()) std::printf(" (skipped %d: %s)", problems.total(), problems.summary().c_str());
     std::printf("\nvehicles >= %g px tall: %d (shorter, ignored: %d)\n", o.min_height, n_gt, n_ignored);
+    // AP ranks what a run without --sweep-thresholds ranks.
+    std::vector<Scored> ranked;
+    for (const auto& s : all)
+      if (s.score >= float(std::min(operating, o.ap_threshold))) ranked.push_back(s);
     std::printf("precision %.3f recall %.3f AP50 %.3f (TP %d FP %d FN %d) at score >= %.2f, IoU %.2f\n", precision,
-                recall, averagePrecision(all, n_gt), tp, fp, n_gt - tp, operating, o.iou);
+                recall, averagePrecision(ranked, n_gt), tp, fp, n_gt - tp, operating, o.iou);
+    for (double t : o.sweep) {
+      int stp = 0, sfp = 0;
+      countAt(t, &stp, &sfp);
+      std::printf("at score %.2f: precision %.3f recall %.3f (TP %d FP %d FN %d)\n", t,
+                  stp + sfp ? double(stp) / (stp + sfp) : 1.0, n_gt ? double(stp) / n_gt : 1.0, stp, sfp, n_gt - stp);
+    }
     // The first frame includes cv::dnn's lazy setup: timed apart.
     std::vector<double> rest(ms.begin() + (ms.size() > 1), ms.end());
     double mean = 0;
