@@ -64,13 +64,10 @@ fm_build() {
   return "$rc"
 }
 
-# The targets scripts/demo builds: what it runs (vehicle.launch runs
-# detector_model for the detector's model), and the tools of the README's
-# quick start (scripts/checks/test_demo runs the demo in a fresh workspace and
-# checks that those tools and the Python message types are there).
-FM_DEMO_TARGETS="fisheye_mapping_nodelets fisheye_mapping_generate_messages fisheye_mapping_gencfg
-  detector_model rig_info refine_rig make_drive paced_player offline_mapper map_accuracy occupancy_eval detector_eval
-  map_tool"
+# What scripts/demo builds: the fisheye_mapping_demo target of CMakeLists.txt
+# (scripts/checks/test_demo runs the demo in a fresh workspace and checks that
+# the README's quick-start tools and the Python message types are there).
+FM_DEMO_TARGETS=fisheye_mapping_demo
 
 # fm_source VARIANT: sources the devel space so rosrun/roslaunch find the package.
 fm_source() {
