@@ -63,16 +63,25 @@ cv::Mat InfinityCost::compute(const SweepLevel& level, const PlaneSweepConfig& c
   // like the backends' running sums): a window counts only when all of its
   // samples are usable, as in the backends. (Not NaN for the unusable ones:
   // a running sum never loses a NaN.)
-  std::vector<cv::Mat> sums(views);
+  // The views are independent: one thread each, warp and box filter
+  // (cv::boxFilter runs on one thread), into buffers kept from frame to
+  // frame (fresh ones cost more in page faults than the filter itself).
+  Cache& scratch = cache_[level.id & 3];
+  std::vector<const std::vector<Sample>*> view_samples(static_cast<size_t>(views));
+  for (int v = 0; v < views; ++v) view_samples[static_cast<size_t>(v)] = &this->samples(level, v);
+  scratch.warped.resize(static_cast<size_t>(views));
+  scratch.sums.resize(static_cast<size_t>(views));
+  std::vector<cv::Mat>& sums = scratch.sums;
+#pragma omp parallel for schedule(dynamic)
   for (int v = 0; v < views; ++v) {
-    const std::vector<Sample>& samples = this->samples(level, v);
-    cv::Mat warped(h, w, CV_32FC4);
+    const Sample* samples = view_samples[static_cast<size_t>(v)]->data();
+    cv::Mat& warped = scratch.warped[static_cast<size_t>(v)];
+    warped.create(h, w, CV_32FC4);
     const float* img = level.images[v].ptr<float>();
-#pragma omp parallel for schedule(static)
     for (int y = 0; y < h; ++y) {
       float* out = warped.ptr<float>(y);
       const float* ref = level.ref.ptr<float>(y);
-      const Sample* s = samples.data() + static_cast<size_t>(y) * w;
+      const Sample* s = samples + static_cast<size_t>(y) * w;
       for (int x = 0; x < w; ++x) {
         const int i = s[x].i00;
         float value = fm_bilinear_blend(s[x].inside, img[i], img[i + s[x].dx], img[i + s[x].dy],

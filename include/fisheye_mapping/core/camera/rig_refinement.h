@@ -168,6 +168,7 @@ class RigMatcher {
     Eigen::Matrix3d R_ref_cam = Eigen::Matrix3d::Zero();
     int width = 0, height = 0;
     cv::Mat map_x, map_y, feature_mask;
+    cv::Mat map_fixed, map_fraction;  // map_x/map_y as cv::convertMaps' fixed-point pair: remap's fast path
   };
   const Warp& warpFor(const Rig& rig, int reference, int c);
   RigRefinementConfig config_;

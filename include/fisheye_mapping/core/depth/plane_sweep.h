@@ -397,6 +397,9 @@ class InfinityCost {
   struct Cache {
     Key key;
     std::vector<std::vector<Sample>> samples;  // per view, per pixel
+    // Scratch kept from frame to frame, per view: the warped view (W, W^2,
+    // W R, 1) and its window sums.
+    std::vector<cv::Mat> warped, sums;
   };
   const std::vector<Sample>& samples(const SweepLevel& level, int view);
   Cache cache_[kSweepSlots];
