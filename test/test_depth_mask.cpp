@@ -118,9 +118,53 @@ TEST(StampPairer, BoundedQueues) {
   EXPECT_EQ(out[0].stamp, 0u);
   for (int i = 10; i < 20; ++i) p.addDetections(i, i, 0.0);
   EXPECT_EQ(p.pendingDetections(), 3u);
+  // 19's detections are there, but it queues behind 2 and 3 (and pushes 1 out).
   out = p.addDepth(19, 19, 0.0);
   ASSERT_EQ(out.size(), 1u);
-  EXPECT_EQ(*out[0].dets, 19);
+  EXPECT_EQ(out[0].stamp, 1u);
+  EXPECT_TRUE(out[0].queue_full);
+  out = p.poll(100.0);
+  ASSERT_EQ(out.size(), 3u);
+  EXPECT_EQ(out[0].stamp, 2u);
+  EXPECT_EQ(out[1].stamp, 3u);
+  EXPECT_EQ(out[2].stamp, 19u);
+  ASSERT_TRUE(out[2].dets.has_value());
+  EXPECT_EQ(*out[2].dets, 19);
+}
+
+// A depth map whose detections came leaves only after every older one: the
+// fusion stage skips a frame older than the last it fused (a paced demo lost
+// every other frame set when the detector dropped the older of two images).
+TEST(StampPairer, DepthMapsLeaveInTheOrderTheyCame) {
+  StampPairer<int, int> p(0.5);
+  EXPECT_TRUE(p.addDepth(1, 1, 0.0).empty());
+  EXPECT_TRUE(p.addDepth(2, 2, 0.1).empty());
+  EXPECT_TRUE(p.addDetections(2, 20, 0.2).empty());  // 2 is ready, 1 still waits
+  EXPECT_EQ(p.pendingDepth(), 2u);
+  auto out = p.addDetections(1, 10, 0.3);
+  ASSERT_EQ(out.size(), 2u);
+  EXPECT_EQ(out[0].stamp, 1u);
+  EXPECT_EQ(*out[0].dets, 10);
+  EXPECT_EQ(out[1].stamp, 2u);
+  EXPECT_EQ(*out[1].dets, 20);
+  // The older one's detections never come: it leaves unmasked at its wait's
+  // end, the newer one right after it, with its detections.
+  EXPECT_TRUE(p.addDepth(3, 3, 1.0).empty());
+  EXPECT_TRUE(p.addDepth(4, 4, 1.1).empty());
+  EXPECT_TRUE(p.addDetections(4, 40, 1.2).empty());
+  EXPECT_TRUE(p.poll(1.49).empty());
+  out = p.poll(1.5);
+  ASSERT_EQ(out.size(), 2u);
+  EXPECT_EQ(out[0].stamp, 3u);
+  EXPECT_FALSE(out[0].dets.has_value());
+  EXPECT_FALSE(out[0].queue_full);
+  EXPECT_EQ(out[1].stamp, 4u);
+  EXPECT_EQ(*out[1].dets, 40);
+  EXPECT_EQ(p.timedOut(), 1u);
+  EXPECT_EQ(p.pendingDepth(), 0u);
+  // Detections of 3 now are late.
+  EXPECT_TRUE(p.addDetections(3, 30, 1.6).empty());
+  EXPECT_EQ(p.late(), 1u);
 }
 
 // max_pending reconfigured while depth maps wait: the next add releases the

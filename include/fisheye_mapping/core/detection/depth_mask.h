@@ -69,7 +69,11 @@ cv::Mat maskDepthBoxes(cv::Mat& depth, const std::vector<Detection>& boxes, floa
 
 /// Pairs depth maps with detections by exact stamp (nanoseconds). Detections may come
 /// before or after their depth; a depth map waits at most `wait_s` for its detections,
-/// then is released without them (timed_out). `now_s` is any monotonic clock in seconds.
+/// then is released without them (timed_out). Depth maps leave in the order they came:
+/// one whose detections are there waits behind an older one still waiting (released
+/// first would put the older one out of order downstream: the fusion stage skips a
+/// frame older than the last it fused, and a paced drive lost every other frame set
+/// so). `now_s` is any monotonic clock in seconds.
 template <class Depth, class Dets>
 class StampPairer {
  public:
@@ -77,7 +81,7 @@ class StampPairer {
     std::uint64_t stamp;
     Depth depth;
     std::optional<Dets> dets;  ///< empty when released after the wait
-    /// Released unpaired before its wait ended, because max_pending maps waited.
+    /// Released before its wait ended, because max_pending maps waited.
     bool queue_full = false;
   };
   explicit StampPairer(double wait_s, std::size_t max_pending = 64) : wait_s_(wait_s), max_pending_(max_pending) {}
@@ -88,32 +92,24 @@ class StampPairer {
 
   std::vector<Pair> addDepth(std::uint64_t stamp, Depth depth, double now_s) {
     std::vector<Pair> out;
+    std::optional<Dets> dets;
     auto it = dets_.find(stamp);
     if (it != dets_.end()) {
-      out.push_back({stamp, std::move(depth), std::move(it->second)});
+      dets = std::move(it->second);
       dets_.erase(it);
-    } else {
-      depth_.push_back({stamp, now_s, std::move(depth)});
-      while (depth_.size() > max_pending_) {  // never hold more than max_pending maps
-        out.push_back({depth_.front().stamp, std::move(depth_.front().depth), std::nullopt, true});
-        depth_.pop_front();
-        ++timed_out_;
-      }
     }
+    depth_.push_back({stamp, now_s, std::move(depth), std::move(dets)});
+    while (depth_.size() > max_pending_) out.push_back(releaseFront(true));  // never hold more than max_pending
     auto rest = poll(now_s);
     out.insert(out.end(), std::make_move_iterator(rest.begin()), std::make_move_iterator(rest.end()));
     return out;
   }
 
   std::vector<Pair> addDetections(std::uint64_t stamp, Dets dets, double now_s) {
-    std::vector<Pair> out;
-    for (auto it = depth_.begin(); it != depth_.end(); ++it) {
-      if (it->stamp != stamp) continue;
-      out.push_back({stamp, std::move(it->depth), std::move(dets)});
-      depth_.erase(it);
-      auto rest = poll(now_s);
-      out.insert(out.end(), std::make_move_iterator(rest.begin()), std::make_move_iterator(rest.end()));
-      return out;
+    for (auto& w : depth_) {
+      if (w.stamp != stamp) continue;
+      if (!w.dets) w.dets = std::move(dets);
+      return poll(now_s);
     }
     if (released_.count(stamp)) {
       ++late_;  // its depth already went out without it
@@ -127,19 +123,17 @@ class StampPairer {
     return poll(now_s);
   }
 
-  /// Releases depth maps that waited longer than the wait.
+  /// Releases, oldest first, the depth maps paired with their detections
+  /// and those that waited longer than the wait, up to the first that
+  /// still waits.
   std::vector<Pair> poll(double now_s) {
     std::vector<Pair> out;
-    while (!depth_.empty() && now_s - depth_.front().arrival >= wait_s_) {
-      released_[depth_.front().stamp] = true;
-      if (released_.size() > 4 * max_pending_) released_.erase(released_.begin());
-      out.push_back({depth_.front().stamp, std::move(depth_.front().depth), std::nullopt});
-      depth_.pop_front();
-      ++timed_out_;
-    }
+    while (!depth_.empty() && (depth_.front().dets || now_s - depth_.front().arrival >= wait_s_))
+      out.push_back(releaseFront(false));
     return out;
   }
 
+  /// Depth maps waiting (for their detections, or behind an older one).
   std::size_t pendingDepth() const { return depth_.size(); }
   std::size_t pendingDetections() const { return dets_.size(); }
   std::uint64_t timedOut() const { return timed_out_; }  ///< depth maps released without detections
@@ -152,7 +146,20 @@ class StampPairer {
     std::uint64_t stamp;
     double arrival;
     Depth depth;
+    std::optional<Dets> dets;
   };
+  Pair releaseFront(bool queue_full) {
+    Waiting& w = depth_.front();
+    Pair p{w.stamp, std::move(w.depth), std::move(w.dets), false};
+    if (!p.dets) {
+      p.queue_full = queue_full;
+      released_[w.stamp] = true;
+      if (released_.size() > 4 * max_pending_) released_.erase(released_.begin());
+      ++timed_out_;
+    }
+    depth_.pop_front();
+    return p;
+  }
   double wait_s_;
   std::size_t max_pending_;
   std::deque<Waiting> depth_;
