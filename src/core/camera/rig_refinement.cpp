@@ -104,6 +104,36 @@ double residualAndJacobian(const Eigen::Matrix3d& R, const Eigen::Vector3d& t, c
   return e / s;
 }
 
+// The model at x and at the two points of each parameter's central
+// difference, evaluated once (each is a rotation's exponential), for the
+// residual and its numeric gradient of any number of matches.
+class NumericJacobian {
+ public:
+  NumericJacobian(const EpipolarModel& model, const Eigen::VectorXd& x, double h = 1e-6)
+      : n_(model.params()), h_(h), R_(model.rotation(x)), t_(model.direction(x)), Rp_(n_), Rm_(n_), tp_(n_), tm_(n_) {
+    for (int k = 0; k < n_; ++k) {
+      Eigen::VectorXd xp = x, xm = x;
+      xp[k] += h, xm[k] -= h;
+      Rp_[k] = model.rotation(xp), Rm_[k] = model.rotation(xm);
+      tp_[k] = model.direction(xp), tm_[k] = model.direction(xm);
+    }
+  }
+  // The residual of m at x; J (size params()) its gradient.
+  double operator()(const Match& m, Eigen::VectorXd* J) const {
+    for (int k = 0; k < n_; ++k)
+      (*J)[k] = (EpipolarModel::residual(Rp_[k], tp_[k], m) - EpipolarModel::residual(Rm_[k], tm_[k], m)) / (2 * h_);
+    return EpipolarModel::residual(R_, t_, m);
+  }
+
+ private:
+  int n_;
+  double h_;
+  Eigen::Matrix3d R_;
+  Eigen::Vector3d t_;
+  std::vector<Eigen::Matrix3d> Rp_, Rm_;
+  std::vector<Eigen::Vector3d> tp_, tm_;
+};
+
 // Gauss-Newton from x over the matches idx with Huber scale `huber` (radians;
 // <= 0: plain least squares). Rotation only: analytic Jacobians of a delta
 // on the camera's side, composed into x (R0 exp(x) exp(delta)); with the
@@ -136,26 +166,14 @@ bool gaussNewton(const EpipolarModel& model, const std::vector<Match>& matches, 
     }
     return x->allFinite();
   }
-  const double h = 1e-6;
   for (int it = 0; it < iterations; ++it) {
     Eigen::MatrixXd H = Eigen::MatrixXd::Zero(n, n);
     Eigen::VectorXd b = Eigen::VectorXd::Zero(n);
-    const Eigen::Matrix3d R = model.rotation(*x);
-    const Eigen::Vector3d t = model.direction(*x);
-    std::vector<Eigen::Matrix3d> Rp(n), Rm(n);
-    std::vector<Eigen::Vector3d> tp(n), tm(n);
-    for (int k = 0; k < n; ++k) {
-      Eigen::VectorXd xp = *x, xm = *x;
-      xp[k] += h, xm[k] -= h;
-      Rp[k] = model.rotation(xp), Rm[k] = model.rotation(xm);
-      tp[k] = model.direction(xp), tm[k] = model.direction(xm);
-    }
+    const NumericJacobian jacobian(model, *x);
     Eigen::VectorXd J(n);
     for (int i : idx) {
       const Match& m = matches[i];
-      const double r = EpipolarModel::residual(R, t, m);
-      for (int k = 0; k < n; ++k)
-        J[k] = (EpipolarModel::residual(Rp[k], tp[k], m) - EpipolarModel::residual(Rm[k], tm[k], m)) / (2 * h);
+      const double r = jacobian(m, &J);
       // Huber on the residual scaled to the image's angular resolution.
       const double rw = r * std::sqrt(m.weight);
       const double w = m.weight * ((huber <= 0 || std::abs(rw) <= huber) ? 1.0 : huber / std::abs(rw));
@@ -358,27 +376,13 @@ double significance(const EpipolarModel& model, const std::vector<Match>& matche
                     const Eigen::VectorXd& x) {
   const int n = model.params();
   if (int(idx.size()) <= n) return 0.0;
-  const double h = 1e-6;
   Eigen::MatrixXd H = Eigen::MatrixXd::Zero(n, n);
   double rr = 0;
   Eigen::VectorXd J(n);
-  // The model at x and at each central difference's two points, once (not
-  // per match: each is a rotation's exponential).
-  const Eigen::Matrix3d R = model.rotation(x);
-  const Eigen::Vector3d t = model.direction(x);
-  std::vector<Eigen::Matrix3d> Rp(n), Rm(n);
-  std::vector<Eigen::Vector3d> tp(n), tm(n);
-  for (int k = 0; k < n; ++k) {
-    Eigen::VectorXd xp = x, xm = x;
-    xp[k] += h, xm[k] -= h;
-    Rp[k] = model.rotation(xp), Rm[k] = model.rotation(xm);
-    tp[k] = model.direction(xp), tm[k] = model.direction(xm);
-  }
+  const NumericJacobian jacobian(model, x);
   for (int i : idx) {
     const Match& m = matches[i];
-    const double r = EpipolarModel::residual(R, t, m);
-    for (int k = 0; k < n; ++k)
-      J[k] = (EpipolarModel::residual(Rp[k], tp[k], m) - EpipolarModel::residual(Rm[k], tm[k], m)) / (2 * h);
+    const double r = jacobian(m, &J);
     H.noalias() += m.weight * J * J.transpose();
     rr += m.weight * r * r;
   }
