@@ -226,6 +226,24 @@ cv::Mat belowHorizon(const std::vector<float>& rays, int w, int h, const Eigen::
   return below;
 }
 
+cv::Mat groundNearerThan(const std::vector<float>& rays, int w, int h, const Eigen::Isometry3d& T_base_ref,
+                         double height, double near) {
+  if (rays.size() != 3 * static_cast<size_t>(w) * h)
+    throw std::invalid_argument("groundNearerThan: " + std::to_string(rays.size()) + " ray components for a " +
+                                std::to_string(w) + "x" + std::to_string(h) + " image");
+  // Ray r meets z_base = height at range (height - t_z) / (up . r), up = R^T e_z.
+  const Eigen::Vector3f up = T_base_ref.linear().row(2).transpose().cast<float>();
+  const float drop = static_cast<float>(T_base_ref.translation().z() - height);  // camera above the plane
+  const float near_f = static_cast<float>(near);
+  cv::Mat out(h, w, CV_8UC1);
+  uint8_t* o = out.ptr<uint8_t>();
+  for (size_t i = 0; i < static_cast<size_t>(w) * h; ++i) {
+    const float down = -(up.x() * rays[3 * i] + up.y() * rays[3 * i + 1] + up.z() * rays[3 * i + 2]);
+    o[i] = drop > 0.0f && down > 0.0f && drop < near_f * down ? 255 : 0;  // drop / down < near
+  }
+  return out;
+}
+
 cv::Mat applyDepthFilters(const DepthFilterConfig& config, const cv::Mat& raw, const cv::Mat& cost,
                           const cv::Mat& ratio, const cv::Mat& texture, const cv::Mat& infinity,
                           const cv::Mat& below) {

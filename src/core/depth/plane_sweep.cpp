@@ -166,6 +166,26 @@ void PlaneSweep::setFilters(const DepthFilterConfig& filters) {
   config_.filters = filters;
 }
 
+const cv::Mat& PlaneSweep::nearGround(const CameraModel& camera, const Eigen::Isometry3d& T_base_ref) {
+  NearGround& c = near_ground_;
+  const FmCameraT<float> params = camera.floatParams();
+  const double height = config_.ground_height;
+  if (c.mask.empty() || std::memcmp(&params, &c.camera, sizeof(params)) != 0 || c.T_base_ref != T_base_ref.matrix() ||
+      c.height != height || c.near != config_.near) {
+    const std::vector<Eigen::Vector3f> rays = pixelRays(camera);
+    std::vector<float> flat(3 * rays.size(), 0.0f);
+    for (size_t i = 0; i < rays.size(); ++i)
+      if (rays[i].allFinite())
+        for (int a = 0; a < 3; ++a) flat[3 * i + a] = rays[i][a];
+    c.mask = groundNearerThan(flat, camera.width(), camera.height(), T_base_ref, height, config_.near);
+    c.camera = params;
+    c.T_base_ref = T_base_ref.matrix();
+    c.height = height;
+    c.near = config_.near;
+  }
+  return c.mask;
+}
+
 const std::vector<float>& PlaneSweep::raysFor(int slot, const CameraModel& camera, const cv::Mat& mask,
                                               unsigned* version) {
   RayCache& cache = rays_[slot];
@@ -397,6 +417,16 @@ DepthResult PlaneSweep::compute(const SweepView& ref, const std::vector<SweepVie
   DepthResult result;
   Frame frame(ref, supports);
   frame.ref_mask = maskWithNonFinite(checkedMask(ref), ref, &result.warnings);
+  if (T_base_ref && config_.ground_planes > 0) {
+    // Rays that meet the road (ground_height) nearer than `near` see it, or
+    // something on it, nearer than any plane: not swept, no depth (a low
+    // camera's bottom rows; before, some took a wrong plane's range).
+    const cv::Mat& near_road = nearGround(ref.camera, *T_base_ref);
+    if (cv::countNonZero(near_road) > 0) {
+      frame.ref_mask = frame.ref_mask.clone();
+      frame.ref_mask.setTo(255, near_road);
+    }
+  }
   frame.used = selectSupportViews(config_, ref.camera, supports, &result.dropped_views);
   if (frame.used.size() > FM_SWEEP_MAX_VIEWS) {
     throw std::invalid_argument("too many supporting views: " + std::to_string(frame.used.size()) + " > " +

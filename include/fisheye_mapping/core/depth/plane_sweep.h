@@ -130,6 +130,10 @@ struct PlaneSweepConfig {
   // Depth range, metres of range along the ray (the output's unit): output
   // outside [near, far] is dropped. The fronto-parallel planes span z-depths
   // near to far, so every one meets every ray within or beyond the range.
+  // With ground planes and a mount, pixels whose ray meets the road
+  // (ground_height) nearer than `near` are not swept and get no depth
+  // (groundNearerThan): no plane holds what they see, and some took a wrong
+  // plane's range, 2-4 times too far (a camera 0.65 m above the road).
   double near = 1.5;
   double far = 60.0;
   int ground_planes = 30;        // 0 disables the family
@@ -256,6 +260,15 @@ cv::Mat toSweepImage(const cv::Mat& image, const std::string& what);
 // alpha_by_horizon), 0 elsewhere and where there is no ray. Throws
 // std::invalid_argument when rays has not 3 w h components.
 cv::Mat belowHorizon(const std::vector<float>& rays, int w, int h, const Eigen::Isometry3d& T_base_ref);
+
+// The pixels whose ray (`rays` as belowHorizon's) meets the plane z_base =
+// height nearer than `near` (range along the ray): CV_8UC1, 255 there, 0
+// elsewhere. With the road's height (ground_height) these pixels see the
+// road, or something on it, nearer than the sweep's nearest range: a low
+// camera's bottom rows (PlaneSweep::compute neither sweeps them nor gives
+// them a depth). Throws std::invalid_argument as belowHorizon.
+cv::Mat groundNearerThan(const std::vector<float>& rays, int w, int h, const Eigen::Isometry3d& T_base_ref,
+                         double height, double near);
 
 // Applies the enabled filters to raw range (NaN invalid) given the best cost,
 // ratio, texture and infinity-cost images (texture / infinity may be empty:
@@ -448,6 +461,15 @@ class PlaneSweep {
     unsigned version = 0;
   };
   RayCache rays_[kSweepSlots];
+  // groundNearerThan of the reference camera, kept with what it was made of.
+  struct NearGround {
+    FmCameraT<float> camera{};
+    Eigen::Matrix4d T_base_ref = Eigen::Matrix4d::Zero();
+    double height = NAN, near = NAN;
+    cv::Mat mask;
+  };
+  const cv::Mat& nearGround(const CameraModel& camera, const Eigen::Isometry3d& T_base_ref);
+  NearGround near_ground_;
   InfinityCost infinity_;
 };
 
