@@ -7,7 +7,10 @@
 // images whatever the cameras' yaw; only parallax and the rotation error
 // separate them). ORB features of the reference image are matched to those of
 // the resampled image within a window around their epipolar plane (mutual best
-// match, ratio test), and each match is refined to subpixel by KLT. Keypoints
+// match, ratio test), and each match is refined to subpixel by KLT (a match
+// KLT moves 3 px or more is dropped, unless fewer than min_inliers settle:
+// then it keeps its keypoint at 1/16 of the weight; a wide baseline's
+// patches differ in scale and blur, docs/depth.md "A surround-view rig"). Keypoints
 // become unit bearing rays through the camera models (any direction, z <= 0
 // included); a resampled pixel's ray is the support camera's ray, exactly.
 // Matches of all frame sets are pooled per camera. With the calibrated
