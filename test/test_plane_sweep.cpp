@@ -54,17 +54,6 @@ fm::Intrinsics pinhole640x480(double f) {
   return in;
 }
 
-// The camera's pixel rays as belowHorizon / groundNearerThan take them (3
-// floats per pixel, zero where none).
-std::vector<float> flatRays(const fm::CameraModel& cam) {
-  const std::vector<Eigen::Vector3f> r = fm::pixelRays(cam);
-  std::vector<float> rays(3 * r.size(), 0.0f);
-  for (size_t i = 0; i < r.size(); ++i) {
-    if (r[i].allFinite()) for (int a = 0; a < 3; ++a) rays[3 * i + a] = r[i][a];
-  }
-  return rays;
-}
-
 // Window sums of W over R for the ZNCC function.
 float costOf(const std::vector<float>& w, const std::vector<float>& r) {
   double sw = 0, sww = 0, swr = 0, sr = 0, srr = 0;
@@ -377,7 +366,7 @@ TEST(DepthReconfigure, AlphaFollowsTheHorizonMaskByHand) {
 // its upper half looks below it; level, the horizon is row cy.
 TEST(PlaneSweepFilters, BelowHorizonFollowsTheMount) {
   const fm::Intrinsics in = pinhole640x480(400.0);
-  const std::vector<float> rays = flatRays(fm::CameraModel::pinhole(in));
+  const std::vector<float> rays = fm::flatPixelRays(fm::CameraModel::pinhole(in));
   // Optical frame (x right, y down, z forward) in base (x forward, y left, z up), then pitched down.
   Eigen::Matrix3d level;
   level.col(0) = -Eigen::Vector3d::UnitY();
@@ -403,7 +392,7 @@ TEST(PlaneSweepFilters, BelowHorizonFollowsTheMount) {
 // ray (x, y, 1) / |.| meets the plane at range 0.6 |(x, y, 1)| / y, y = (v - cy) / f.
 TEST(PlaneSweepFilters, GroundNearerThanNearByHand) {
   const fm::Intrinsics in = pinhole640x480(300.0);
-  const std::vector<float> rays = flatRays(fm::CameraModel::pinhole(in));
+  const std::vector<float> rays = fm::flatPixelRays(fm::CameraModel::pinhole(in));
   Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
   T.linear().col(0) = -Eigen::Vector3d::UnitY();
   T.linear().col(1) = -Eigen::Vector3d::UnitZ();

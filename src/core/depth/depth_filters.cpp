@@ -226,6 +226,15 @@ cv::Mat belowHorizon(const std::vector<float>& rays, int w, int h, const Eigen::
   return below;
 }
 
+std::vector<float> flatPixelRays(const CameraModel& camera) {
+  const std::vector<Eigen::Vector3f> rays = pixelRays(camera);
+  std::vector<float> flat(3 * rays.size(), 0.0f);
+  for (size_t i = 0; i < rays.size(); ++i)
+    if (rays[i].allFinite())
+      for (int a = 0; a < 3; ++a) flat[3 * i + a] = rays[i][a];
+  return flat;
+}
+
 cv::Mat groundNearerThan(const std::vector<float>& rays, int w, int h, const Eigen::Isometry3d& T_base_ref,
                          double height, double near) {
   if (rays.size() != 3 * static_cast<size_t>(w) * h)

@@ -172,12 +172,8 @@ const cv::Mat& PlaneSweep::nearGround(const CameraModel& camera, const Eigen::Is
   const double height = config_.ground_height;
   if (c.mask.empty() || std::memcmp(&params, &c.camera, sizeof(params)) != 0 || c.T_base_ref != T_base_ref.matrix() ||
       c.height != height || c.near != config_.near) {
-    const std::vector<Eigen::Vector3f> rays = pixelRays(camera);
-    std::vector<float> flat(3 * rays.size(), 0.0f);
-    for (size_t i = 0; i < rays.size(); ++i)
-      if (rays[i].allFinite())
-        for (int a = 0; a < 3; ++a) flat[3 * i + a] = rays[i][a];
-    c.mask = groundNearerThan(flat, camera.width(), camera.height(), T_base_ref, height, config_.near);
+    c.mask = groundNearerThan(flatPixelRays(camera), camera.width(), camera.height(), T_base_ref, height, config_.near);
+    c.any = cv::countNonZero(c.mask) > 0;
     c.camera = params;
     c.T_base_ref = T_base_ref.matrix();
     c.height = height;
@@ -422,7 +418,7 @@ DepthResult PlaneSweep::compute(const SweepView& ref, const std::vector<SweepVie
     // something on it, nearer than any plane: not swept, no depth (a low
     // camera's bottom rows; before, some took a wrong plane's range).
     const cv::Mat& near_road = nearGround(ref.camera, *T_base_ref);
-    if (cv::countNonZero(near_road) > 0) {
+    if (near_ground_.any) {
       frame.ref_mask = frame.ref_mask.clone();
       frame.ref_mask.setTo(255, near_road);
     }

@@ -261,6 +261,10 @@ cv::Mat toSweepImage(const cv::Mat& image, const std::string& what);
 // std::invalid_argument when rays has not 3 w h components.
 cv::Mat belowHorizon(const std::vector<float>& rays, int w, int h, const Eigen::Isometry3d& T_base_ref);
 
+// The camera's pixel rays as belowHorizon and groundNearerThan take them: 3
+// floats per pixel, row-major, zero where the pixel has no ray.
+std::vector<float> flatPixelRays(const CameraModel& camera);
+
 // The pixels whose ray (`rays` as belowHorizon's) meets the plane z_base =
 // height nearer than `near` (range along the ray): CV_8UC1, 255 there, 0
 // elsewhere. With the road's height (ground_height) these pixels see the
@@ -467,6 +471,7 @@ class PlaneSweep {
     Eigen::Matrix4d T_base_ref = Eigen::Matrix4d::Zero();
     double height = NAN, near = NAN;
     cv::Mat mask;
+    bool any = false;  // mask has a pixel
   };
   const cv::Mat& nearGround(const CameraModel& camera, const Eigen::Isometry3d& T_base_ref);
   NearGround near_ground_;
