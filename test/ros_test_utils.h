@@ -2,7 +2,9 @@
 #ifndef FISHEYE_MAPPING_TEST_ROS_TEST_UTILS_H_
 #define FISHEYE_MAPPING_TEST_ROS_TEST_UTILS_H_
 
+#include <geometry_msgs/TransformStamped.h>
 #include <ros/ros.h>
+#include <tf2_msgs/TFMessage.h>
 
 #include <functional>
 
@@ -18,6 +20,24 @@ inline bool waitFor(const std::function<bool()>& done, double seconds) {
   }
   return done();
 }
+
+// What tf2_ros::TransformBroadcaster does (a TFMessage on /tf), with the
+// count of the nodes listening: a test waits until the node under test has
+// connected before the first pose, which tf would otherwise drop unseen (the
+// node's first frame then never gets its pose).
+class TfPublisher {
+ public:
+  TfPublisher() : pub_(ros::NodeHandle().advertise<tf2_msgs::TFMessage>("/tf", 100)) {}
+  void sendTransform(const geometry_msgs::TransformStamped& t) {
+    tf2_msgs::TFMessage m;
+    m.transforms.push_back(t);
+    pub_.publish(m);
+  }
+  uint32_t getNumSubscribers() const { return pub_.getNumSubscribers(); }
+
+ private:
+  ros::Publisher pub_;
+};
 
 }  // namespace test
 }  // namespace fisheye_mapping

@@ -23,7 +23,6 @@
 #include <ros/package.h>
 #include <ros/ros.h>
 #include <tf2_eigen/tf2_eigen.h>
-#include <tf2_ros/transform_broadcaster.h>
 
 #include "fisheye_mapping/FilePath.h"
 #include "fisheye_mapping/FrameDone.h"
@@ -177,8 +176,9 @@ class TsdfLifecycle : public ::testing::Test {
           ++done_;
           fused_ += m->fused;
         }));
-    ASSERT_TRUE(waitFor([this] { return depth_pub_.getNumSubscribers() > 0 && done_sub_.getNumPublishers() > 0; }, 30.0))
-        << node.name() << " never connected";
+    ASSERT_TRUE(waitFor([this] {
+      return depth_pub_.getNumSubscribers() > 0 && done_sub_.getNumPublishers() > 0 && tf_.getNumSubscribers() > 0;
+    }, 30.0)) << node.name() << " never connected";
   }
 
   // Plays views [from, to) of an n-view orbit at stamps t0 + 0.1 s * i and
@@ -228,7 +228,7 @@ class TsdfLifecycle : public ::testing::Test {
 
   ros::NodeHandle nh_;
   ros::AsyncSpinner spinner_{2};
-  tf2_ros::TransformBroadcaster tf_;
+  fisheye_mapping::test::TfPublisher tf_;
   ros::Publisher depth_pub_;
   ros::Subscriber done_sub_, diag_sub_;
   std::atomic<int> done_{0}, fused_{0};

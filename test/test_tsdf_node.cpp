@@ -32,7 +32,6 @@
 #include <sensor_msgs/PointCloud2.h>
 #include <std_srvs/Trigger.h>
 #include <tf2_eigen/tf2_eigen.h>
-#include <tf2_ros/transform_broadcaster.h>
 #include <nav_msgs/OccupancyGrid.h>
 #include <visualization_msgs/MarkerArray.h>
 
@@ -182,7 +181,8 @@ class TsdfFusionNode : public ::testing::Test {
             for (const auto& kv : st.values) diag[kv.key] = kv.value;
           }
         }));
-    ASSERT_TRUE(waitFor([this] { return depth_pub_.getNumSubscribers() > 0; }, 30.0)) << "Tsdf never subscribed";
+    ASSERT_TRUE(waitFor([this] { return depth_pub_.getNumSubscribers() > 0 && tf_.getNumSubscribers() > 0; }, 30.0))
+        << "Tsdf never subscribed";
   }
 
   // Publishes the vehicle pose (map -> base_link) and the depth the camera sees.
@@ -228,7 +228,7 @@ class TsdfFusionNode : public ::testing::Test {
   ros::Publisher image_pub_ = nh_.advertise<sensor_msgs::Image>("image", 50);
   ros::Publisher ci_info_pub_ = nh_.advertise<sensor_msgs::CameraInfo>("ci/depth_masked/camera_info", 50);
   ros::Subscriber cloud_sub_, mesh_sub_, diag_sub_;
-  tf2_ros::TransformBroadcaster tf_;
+  fisheye_mapping::test::TfPublisher tf_;
   fm::Rig rig_;
 };
 
