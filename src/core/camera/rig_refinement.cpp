@@ -404,6 +404,7 @@ void RigRefinementConfig::validate() const {
   require(max_hamming >= 0 && max_hamming <= 256, "max_hamming", "must be in [0, 256]");
   require(klt_window >= 5 && klt_window <= 51, "klt_window", "must be in [5, 51]");
   require(min_inliers >= 5, "min_inliers", "must be >= 5");
+  require(min_settled >= 0, "min_settled", "must be >= 0");
   require(max_initial_residual_deg > 0 && max_initial_residual_deg < 45, "max_initial_residual_deg",
           "must be in (0, 45)");
   require(ransac_threshold_deg > 0 && ransac_threshold_deg <= max_initial_residual_deg, "ransac_threshold_deg",
@@ -628,7 +629,7 @@ std::vector<std::vector<EpipolarMatch>> RigMatcher::match(const Rig& rig, int re
                                cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 30, 0.005),
                                cv::OPTFLOW_USE_INITIAL_FLOW);
       // Where KLT does not settle within 3 px the match goes, unless too
-      // few settle to make a fit (min_inliers): then those keep their
+      // few settle to make a fit (min_settled): then those keep their
       // keypoints, weighted as their precision, 4 times coarser (1/16).
       // Patches of a wide baseline differ in scale and blur: on the surround
       // rig of docs/depth.md KLT slid off 54 of a mirror camera's 58
@@ -645,7 +646,7 @@ std::vector<std::vector<EpipolarMatch>> RigMatcher::match(const Rig& rig, int re
           coarse[i] = 1;
         }
       }
-      for (size_t i = 0; i < refined.size(); ++i) ok[i] = !coarse[i] || settled < config_.min_inliers;
+      for (size_t i = 0; i < refined.size(); ++i) ok[i] = !coarse[i] || settled < config_.min_settled;
     }
     const CameraModel& m_ref = rig.cameras[reference].model;
     const CameraModel& m_cam = rig.cameras[c].model;

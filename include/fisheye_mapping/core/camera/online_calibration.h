@@ -88,7 +88,7 @@ struct SelfCalibrationConfig {
   int period_steady = 8;             // self_calibration_period_steady: ... once every camera is steady
   int window = 4;                    // self_calibration_window: sampled frame sets whose matches are pooled
   double max_correction_deg = 2.0;   // self_calibration_max_correction_deg: from the given calibration
-  int min_inliers = 50;              // self_calibration_min_inliers: minimum evidence of a fit (docs/depth.md#a-surround-view-rig-2026-12-06)
+  int min_inliers = 20;              // self_calibration_min_inliers: minimum evidence of a fit (docs/depth.md#one-frame-set-a-fit-from-20-inliers-2026-12-06)
   double gain = 0.6;                 // self_calibration_gain: fraction of a fit applied per update
   double change_deg = 0.15;          // self_calibration_change_deg: the newest set alone needing more restarts the pool
   int max_features = 3000;           // self_calibration_features: ORB keypoints per image

@@ -8,7 +8,7 @@
 // separate them). ORB features of the reference image are matched to those of
 // the resampled image within a window around their epipolar plane (mutual best
 // match, ratio test), and each match is refined to subpixel by KLT (a match
-// KLT moves 3 px or more is dropped, unless fewer than min_inliers settle:
+// KLT moves 3 px or more is dropped, unless fewer than min_settled settle:
 // then it keeps its keypoint at 1/16 of the weight; a wide baseline's
 // patches differ in scale and blur, docs/depth.md "A surround-view rig"). Keypoints
 // become unit bearing rays through the camera models (any direction, z <= 0
@@ -62,6 +62,9 @@ struct RigRefinementConfig {
   int klt_window = 15;              // KLT window side, pixels
   bool weight_by_resolution = true;  // weight residuals by the images' pixels per radian at the rays
   int min_inliers = 50;             // fewer: the camera is left unchanged
+  // Fewer matches than this settle under KLT: the unsettled keep their
+  // keypoints at 1/16 of the weight (a wide baseline's matches).
+  int min_settled = 50;
   double max_initial_residual_deg = 3.0;  // matches beyond this at the calibration are dropped
   double ransac_threshold_deg = 0.3;
   int ransac_iterations = 300;
