@@ -51,7 +51,7 @@ const char* kUsage =
     "  --every K               use every K-th frame set, 1 to 1000000 (default 1)\n"
     "  --self-masks LIST       NAME=PNG per camera: where the car body hides the scene\n"
     "  --refine-translation    refine the translations too (default: rotations only)\n"
-    "  --min-inliers N         matches a camera needs, at least 5 (default 50)\n";
+    "  --min-inliers N         matches a camera needs, at least 5 (default 20)\n";
 
 [[noreturn]] void usageError(const std::string& why) {
   std::cerr << "refine_rig: " << why << "\n" << kUsage;

@@ -61,7 +61,7 @@ struct RigRefinementConfig {
   bool subpixel = true;             // refine support keypoints by local image alignment (KLT)
   int klt_window = 15;              // KLT window side, pixels
   bool weight_by_resolution = true;  // weight residuals by the images' pixels per radian at the rays
-  int min_inliers = 50;             // fewer: the camera is left unchanged
+  int min_inliers = 20;             // fewer: the camera is left unchanged (docs/depth.md "One frame set")
   // Fewer matches than this settle under KLT: the unsettled keep their
   // keypoints at 1/16 of the weight (a wide baseline's matches).
   int min_settled = 50;
