@@ -22,11 +22,14 @@
 #include <cv_bridge/cv_bridge.h>
 #include <pcl_conversions/pcl_conversions.h>
 #include <ros/ros.h>
+#include <rosbag/bag.h>
+#include <rosbag/view.h>
 #include <sensor_msgs/Image.h>
 #include <sensor_msgs/PointCloud2.h>
 #include <signal.h>
 #include <sys/wait.h>
 #include <tf2_eigen/tf2_eigen.h>
+#include <tf2_msgs/TFMessage.h>
 #include <tf2_ros/buffer.h>
 #include <tf2_ros/transform_listener.h>
 #include <unistd.h>
@@ -176,9 +179,18 @@ TEST(OwnRig, OtherTopicsOdomPosesRaisedBaseAndSelfMaskGiveAMap) {
   }, 30.0);
   ros::WallDuration(2.0).sleep();  // the last cloud (published every 0.25 s)
   // cam0 in odom at every depth stamp: the bag's odom -> base_link and
-  // rig_tf's base_link -> front_center_optical_frame.
+  // rig_tf's base_link -> front_center_optical_frame. The poses are read from
+  // the bag itself: this node's listener may connect to the player's /tf
+  // after its first poses went out.
   std::map<uint64_t, geometry_msgs::TransformStamped> tf_camera;
   std::string tf_error;
+  {
+    rosbag::Bag bag(ex + "/drive.bag");
+    for (const rosbag::MessageInstance& m : rosbag::View(bag, rosbag::TopicQuery("/tf"))) {
+      if (const auto tf = m.instantiate<tf2_msgs::TFMessage>())
+        for (const auto& t : tf->transforms) tf_buffer.setTransform(t, "drive.bag");
+    }
+  }
   {
     std::lock_guard<std::mutex> l(mu);
     for (const auto& [stamp, d] : band_depth) {
