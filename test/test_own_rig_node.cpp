@@ -184,18 +184,23 @@ TEST(OwnRig, OtherTopicsOdomPosesRaisedBaseAndSelfMaskGiveAMap) {
   // after its first poses went out.
   std::map<uint64_t, geometry_msgs::TransformStamped> tf_camera;
   std::string tf_error;
-  {
+  tf2_ros::Buffer drive_tf(ros::Duration(30.0));
+  try {
+    drive_tf.setTransform(tf_buffer.lookupTransform("base_link", "front_center_optical_frame", ros::Time(0)), "rig_tf",
+                          true);
     rosbag::Bag bag(ex + "/drive.bag");
     for (const rosbag::MessageInstance& m : rosbag::View(bag, rosbag::TopicQuery("/tf"))) {
       if (const auto tf = m.instantiate<tf2_msgs::TFMessage>())
-        for (const auto& t : tf->transforms) tf_buffer.setTransform(t, "drive.bag");
+        for (const auto& t : tf->transforms) drive_tf.setTransform(t, "drive.bag");
     }
+  } catch (const tf2::TransformException& e) {
+    tf_error = std::string("rig_tf: ") + e.what();
   }
   {
     std::lock_guard<std::mutex> l(mu);
     for (const auto& [stamp, d] : band_depth) {
       try {
-        tf_camera[stamp] = tf_buffer.lookupTransform("odom", "front_center_optical_frame", ros::Time().fromNSec(stamp));
+        tf_camera[stamp] = drive_tf.lookupTransform("odom", "front_center_optical_frame", ros::Time().fromNSec(stamp));
       } catch (const tf2::TransformException& e) {
         tf_error = e.what();
       }
