@@ -338,6 +338,72 @@ TEST(DepthReconfigure, EachFilterByHand) {
   EXPECT_TRUE(std::isnan(fm::applyDepthFilters(f, raw, cost, ratio).at<float>(3, 3)));
 }
 
+// road_gamma_relative by hand: a road seen at a grazing angle about 13 m
+// away, its range growing by 0.7 m a row (more than gamma, 0.5 m), and one
+// pixel at 20 m in it. With gamma alone the middle pixel has only its row's 4
+// neighbours within 0.5 m, fewer than delta 0.3 of 24 (7.2): dropped. On the
+// road with road_gamma_relative 0.1 its tolerance is 1.34 m, the rows above
+// and below count too (4 + 5 + 5 = 14): kept; the 20 m pixel (tolerance 2 m,
+// 6 m from its neighbours) is dropped either way. Off the road (no mask, or
+// the mask's 0) gamma alone.
+TEST(DepthReconfigure, ConsistencyToleranceGrowsWithTheRangeOnTheRoadByHand) {
+  cv::Mat raw(5, 5, CV_32FC1), cost(5, 5, CV_32FC1, cv::Scalar(0.01f)), ratio(5, 5, CV_32FC1, cv::Scalar(0.5f));
+  for (int v = 0; v < 5; ++v) raw.row(v).setTo(12.0f + 0.7f * static_cast<float>(v));
+  raw.at<float>(0, 4) = 20.0f;
+  const cv::Mat road(5, 5, CV_8UC1, cv::Scalar(255)), off_road(5, 5, CV_8UC1, cv::Scalar(0));
+  fm::DepthFilterConfig f;
+  f.texture = f.cost = f.uniqueness = false;
+  f.consistency = true;
+  ASSERT_EQ(f.consistency_window, 5);
+  ASSERT_EQ(f.road_gamma_relative, 0.0);  // the paper's fixed gamma by default
+  cv::Mat d = fm::applyDepthFilters(f, raw, cost, ratio, cv::Mat(), cv::Mat(), cv::Mat(), road);
+  EXPECT_TRUE(std::isnan(d.at<float>(2, 2)));
+  EXPECT_TRUE(std::isnan(d.at<float>(0, 4)));
+  f.road_gamma_relative = 0.1;
+  d = fm::applyDepthFilters(f, raw, cost, ratio, cv::Mat(), cv::Mat(), cv::Mat(), road);
+  EXPECT_FLOAT_EQ(d.at<float>(2, 2), 13.4f);
+  EXPECT_TRUE(std::isnan(d.at<float>(0, 4)));
+  EXPECT_TRUE(std::isnan(fm::applyDepthFilters(f, raw, cost, ratio).at<float>(2, 2)));
+  EXPECT_TRUE(
+      std::isnan(fm::applyDepthFilters(f, raw, cost, ratio, cv::Mat(), cv::Mat(), cv::Mat(), off_road).at<float>(2, 2)));
+  // Near the camera gamma still rules: 4 m with neighbours 0.7 m off is
+  // dropped (tolerance max(0.5, 0.4) = 0.5 m).
+  for (int v = 0; v < 5; ++v) raw.row(v).setTo(2.6f + 0.7f * static_cast<float>(v));
+  d = fm::applyDepthFilters(f, raw, cost, ratio, cv::Mat(), cv::Mat(), cv::Mat(), road);
+  EXPECT_TRUE(std::isnan(d.at<float>(2, 2)));
+  EXPECT_THROW(fm::applyDepthFilters(f, raw, cost, ratio, cv::Mat(), cv::Mat(), cv::Mat(), cv::Mat(4, 5, CV_8UC1)),
+               std::invalid_argument);
+}
+
+// onTheRoad by hand: a camera 1.5 m above the base frame's ground looking
+// along its x axis (camera z = base x, camera y = base -z). A ray 10 deg down
+// meets z = 0 at 1.5 / sin 10 deg = 8.638 m: at that range its point is on
+// the road, 0.5 m nearer it is 0.087 m above it (inside [-0.3, 0.3]), at
+// 6 m 0.458 m above (outside); a ray 10 deg up is never on it.
+TEST(DepthReconfigure, OnTheRoadByHand) {
+  Eigen::Isometry3d T_base_ref = Eigen::Isometry3d::Identity();
+  T_base_ref.linear() << 0, 0, 1, -1, 0, 0, 0, -1, 0;  // columns: camera x, y, z in the base frame
+  T_base_ref.translation() = Eigen::Vector3d(0, 0, 1.5);
+  const double a = 10.0 * M_PI / 180.0;
+  // Rays in the camera frame: (0, sin a, cos a) points down (camera y = base -z).
+  const std::vector<float> rays = {0.0f, float(std::sin(a)),  float(std::cos(a)), 0.0f, float(std::sin(a)),
+                                   float(std::cos(a)), 0.0f, float(std::sin(a)),  float(std::cos(a)), 0.0f,
+                                   float(-std::sin(a)), float(std::cos(a))};
+  cv::Mat range(1, 4, CV_32FC1);
+  range.at<float>(0, 0) = float(1.5 / std::sin(a));
+  range.at<float>(0, 1) = float(1.5 / std::sin(a) - 0.5);
+  range.at<float>(0, 2) = 6.0f;
+  range.at<float>(0, 3) = 8.0f;
+  const cv::Mat road = fm::onTheRoad(rays, range, T_base_ref, -0.3, 0.3);
+  EXPECT_EQ(road.at<uint8_t>(0, 0), 255);
+  EXPECT_EQ(road.at<uint8_t>(0, 1), 255);
+  EXPECT_EQ(road.at<uint8_t>(0, 2), 0);
+  EXPECT_EQ(road.at<uint8_t>(0, 3), 0);
+  range.at<float>(0, 0) = NAN;
+  EXPECT_EQ(fm::onTheRoad(rays, range, T_base_ref, -0.3, 0.3).at<uint8_t>(0, 0), 0);
+  EXPECT_THROW(fm::onTheRoad(std::vector<float>(9), range, T_base_ref, -0.3, 0.3), std::invalid_argument);
+}
+
 // alpha_by_horizon: the cost threshold follows a mask of the pixels below the
 // horizon instead of split_row (by hand: cost 0.2 everywhere, alpha 0.05 /
 // 0.3; the mask's left half is below).

@@ -148,12 +148,45 @@ TEST(VehicleMotion, ParkedAndMovingCarsAreToldApart) {
     EXPECT_EQ(d[1].motion, fm::VehicleMotion::Undecided) << speed;
     for (int k = 3; k < 6; ++k) {
       EXPECT_EQ(d[k].track, d[0].track) << speed << " frame " << k;
-      EXPECT_EQ(d[k].motion, speed == 0.0 ? fm::VehicleMotion::Parked : fm::VehicleMotion::Moving)
+      // A moving car's body reads moved from the fourth frame set (the first
+      // with a depth map 0.5 s older), moving_frames (2) in a row the fifth.
+      const fm::VehicleMotion expected = speed == 0.0 ? fm::VehicleMotion::Parked
+                                         : k < 4      ? fm::VehicleMotion::Undecided
+                                                      : fm::VehicleMotion::Moving;
+      EXPECT_EQ(d[k].motion, expected)
           << "speed " << speed << " frame " << k << ": measured " << d[k].speed << " m/s";
       // Within 1.5 m/s of the truth: the apparent drift of what is seen of it.
       EXPECT_NEAR(d[k].speed, std::abs(speed), 1.5) << speed << " frame " << k;
     }
   }
+}
+
+// moving_frames: the static check must read a body moved in that many
+// measured frame sets in a row. A car driving ahead at 10 m/s reads moved
+// from the fourth frame set on: called moving there with moving_frames 1, a
+// frame set later with 2 (the default), two later with 3; a frame set whose
+// depth shows nothing of it (no reading) neither counts nor breaks the row.
+TEST(VehicleMotion, MovingNeedsMovingFramesReadingsInARow) {
+  auto first_moving = [](int moving_frames, int blind_frame) {
+    fm::VehicleMotionConfig c;
+    c.moving_frames = moving_frames;
+    fm::VehicleMotionTracker tracker(c);
+    const fm::CameraModel cam = camera();
+    for (int k = 0; k < 8; ++k) {
+      const double t = 0.2 * k;
+      const Eigen::Isometry3d T = cameraPose(8.0 * t);
+      Render r = render(cam, T, 12.0 + 10.0 * t, 3.0);
+      if (k == blind_frame) r.depth.setTo(std::numeric_limits<float>::quiet_NaN());
+      const auto d = tracker.update({r.box}, cam.width(), cam.height(), r.depth, cam, T, t);
+      if (k == blind_frame) EXPECT_EQ(d[0].track, -1) << "no depth, no position";
+      if (d[0].motion == fm::VehicleMotion::Moving) return k;
+    }
+    return -1;
+  };
+  EXPECT_EQ(first_moving(1, -1), 3);
+  EXPECT_EQ(first_moving(2, -1), 4);
+  EXPECT_EQ(first_moving(3, -1), 5);
+  EXPECT_EQ(first_moving(2, 4), 5);  // the blind fifth frame set: the row goes on in the sixth
 }
 
 // Passing a parked car, its box is cut by the image border and what is seen

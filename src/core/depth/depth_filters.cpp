@@ -253,12 +253,41 @@ cv::Mat groundNearerThan(const std::vector<float>& rays, int w, int h, const Eig
   return out;
 }
 
+cv::Mat onTheRoad(const std::vector<float>& rays, const cv::Mat& range, const Eigen::Isometry3d& T_base_ref,
+                  double z_min, double z_max) {
+  const int w = range.cols, h = range.rows;
+  if (range.type() != CV_32FC1) throw std::invalid_argument("onTheRoad: the range must be CV_32FC1");
+  if (rays.size() != 3 * static_cast<size_t>(w) * h)
+    throw std::invalid_argument("onTheRoad: " + std::to_string(rays.size()) + " ray components for a " +
+                                std::to_string(w) + "x" + std::to_string(h) + " image");
+  // z_base of the point at range d along ray r: t_z + d (up . r).
+  const Eigen::Vector3f up = T_base_ref.linear().row(2).transpose().cast<float>();
+  const float tz = static_cast<float>(T_base_ref.translation().z());
+  const float lo = static_cast<float>(z_min), hi = static_cast<float>(z_max);
+  cv::Mat out(h, w, CV_8UC1, cv::Scalar(0));
+  for (int v = 0; v < h; ++v) {
+    const float* d = range.ptr<float>(v);
+    uint8_t* o = out.ptr<uint8_t>(v);
+    for (int u = 0; u < w; ++u) {
+      if (!std::isfinite(d[u])) continue;
+      const size_t i = static_cast<size_t>(v) * w + u;
+      const float z = tz + d[u] * (up.x() * rays[3 * i] + up.y() * rays[3 * i + 1] + up.z() * rays[3 * i + 2]);
+      o[u] = z >= lo && z <= hi ? 255 : 0;
+    }
+  }
+  return out;
+}
+
 cv::Mat applyDepthFilters(const DepthFilterConfig& config, const cv::Mat& raw, const cv::Mat& cost,
                           const cv::Mat& ratio, const cv::Mat& texture, const cv::Mat& infinity,
-                          const cv::Mat& below) {
+                          const cv::Mat& below, const cv::Mat& road) {
   if (!below.empty() && (below.size() != raw.size() || below.type() != CV_8UC1))
     throw std::invalid_argument("applyDepthFilters: the below-horizon mask is " + std::to_string(below.cols) + "x" +
                                 std::to_string(below.rows) + ", the depth " + std::to_string(raw.cols) + "x" +
+                                std::to_string(raw.rows) + " (CV_8UC1 of the same size needed)");
+  if (!road.empty() && (road.size() != raw.size() || road.type() != CV_8UC1))
+    throw std::invalid_argument("applyDepthFilters: the road mask is " + std::to_string(road.cols) + "x" +
+                                std::to_string(road.rows) + ", the depth " + std::to_string(raw.cols) + "x" +
                                 std::to_string(raw.rows) + " (CV_8UC1 of the same size needed)");
   cv::Mat depth = raw.clone();
   const bool use_infinity = config.infinity && !infinity.empty();
@@ -289,16 +318,19 @@ cv::Mat applyDepthFilters(const DepthFilterConfig& config, const cv::Mat& raw, c
   const int r = config.consistency_window / 2;
   const int others = config.consistency_window * config.consistency_window - 1;
   const float gamma = static_cast<float>(config.gamma);
+  const float road_gamma_relative = static_cast<float>(config.road_gamma_relative);
 #pragma omp parallel for schedule(static)
   for (int v = 0; v < h; ++v) {
     for (int u = 0; u < w; ++u) {
       const float d = in.at<float>(v, u);
       if (!std::isfinite(d)) continue;
+      const bool on_road = !road.empty() && road.at<uint8_t>(v, u);
+      const float tolerance = on_road ? std::max(gamma, road_gamma_relative * d) : gamma;
       int consistent = 0;
       for (int y = std::max(0, v - r); y <= std::min(h - 1, v + r); ++y) {
         const float* row = in.ptr<float>(y);
         for (int x = std::max(0, u - r); x <= std::min(w - 1, u + r); ++x) {
-          if ((x != u || y != v) && std::fabs(row[x] - d) < gamma) ++consistent;  // NaN compares false
+          if ((x != u || y != v) && std::fabs(row[x] - d) < tolerance) ++consistent;  // NaN compares false
         }
       }
       if (consistent < config.delta * others) depth.at<float>(v, u) = NAN;

@@ -467,8 +467,14 @@ DepthResult PlaneSweep::compute(const SweepView& ref, const std::vector<SweepVie
   cv::Mat below;
   if (config_.filters.alpha_by_horizon && T_base_ref && !frame.used.empty())
     below = belowHorizon(rays_[kSlotFull].rays, W, H, *T_base_ref);
+  // The road, for its range-grown consistency tolerance.
+  cv::Mat road;
+  if (config_.filters.consistency && config_.filters.road_gamma_relative > 0.0 && T_base_ref &&
+      config_.ground_planes > 0 && !frame.used.empty())
+    road = onTheRoad(rays_[kSlotFull].rays, result.raw_depth, *T_base_ref, config_.ground_height + config_.ground_min,
+                     config_.ground_height + config_.ground_max);
   result.depth = applyDepthFilters(config_.filters, result.raw_depth, result.cost, result.uniqueness, result.texture,
-                                   result.infinity_cost, below);
+                                   result.infinity_cost, below, road);
   if (config_.filters.infinity && !result.infinity_cost.empty()) {
     // The sky's edges: a half-resolution window reaches window_half / 2
     // half-resolution pixels, 2 (window_half / 2) + 1 at full resolution, so

@@ -102,6 +102,10 @@ const ParamTable<DepthFilterConfig>& DepthFilterConfig::params() {
                 "Window of the consistency check (odd)", kRun)
         .number("gamma", [](C& c) -> double& { return c.gamma; }, R::above(0), "m",
                 "Depth difference under which a neighbour is consistent", kRun)
+        .number("road_gamma_relative", [](C& c) -> double& { return c.road_gamma_relative; }, R::between(0, 1), "",
+                "On the road (points within the ground planes' heights, with the mount) the consistency tolerance "
+                "grows with the range: max(gamma, road_gamma_relative * range); 0: gamma alone",
+                kRun)
         .number("delta", [](C& c) -> double& { return c.delta; }, R::between(0, 1), "",
                 "Smallest share of consistent neighbours kept", kRun)
         .flag("filter_infinity", [](C& c) -> bool& { return c.infinity; },

@@ -78,6 +78,9 @@ const ParamTable<DepthMaskConfig>& DepthMaskConfig::params() {
                 "With the static check on, a vehicle is called moving only when at most this share of its body "
                 "agrees with that depth map (beyond static_range, or in between, it stays undecided, masked); "
                 "below static_share")
+        .number("moving_frames", [](C& c) -> int& { return c.motion.moving_frames; }, R::atLeast(1), "",
+                "Measured frame sets in a row whose body must read moved (moving_share) before a vehicle is called "
+                "moving (once moving, it stays so)")
         .number("static_range", [](C& c) -> double& { return c.motion.static_range; }, R::above(0), "m",
                 "Vehicles farther from the camera are not checked (coarse depth)")
         .number("carve_time", [](C& c) -> double& { return c.motion.carve_time; }, R::atLeast(0), "s",

@@ -314,17 +314,19 @@ std::vector<VehicleMotionTracker::Decision> VehicleMotionTracker::update(
       // a vehicle whose measured velocity runs along the ego's heading.
       const bool still = std::isfinite(share[i]) && share[i] >= config_.static_share;
       if (std::isfinite(share[i])) tr.static_hits = still ? tr.static_hits + 1 : 0;
+      if (std::isfinite(share[i])) tr.moved_hits = share[i] < config_.moving_share ? tr.moved_hits + 1 : 0;
       const bool along = alongHeading(tr, *T_W_C);
       const bool static_parked = along && tr.static_hits >= config_.static_frames;
       if (stamp_s - tr.first_seen + 1e-9 >= config_.decide_after && std::isfinite(speed) && std::isfinite(margin)) {
         // Called moving only where the static check (when on) finds the
         // body moved: at most moving_share of it agrees with the depth map
-        // of static_interval before. A vehicle it cannot measure (farther
-        // than static_range, no depth there) stays undecided, so masked: a
-        // far parked car's placed position slides with the coarse depth (it
-        // read 4-5 m/s 20-25 m ahead), and a crossing one's flank fools it.
-        const bool moved = config_.static_interval <= 0.0 ||
-                           (std::isfinite(share[i]) && share[i] < config_.moving_share);
+        // of static_interval before, in moving_frames measured frame sets in
+        // a row (one it cannot measure neither counts nor breaks the row). A
+        // vehicle it cannot measure (farther than static_range, no depth
+        // there) stays undecided, so masked: a far parked car's placed
+        // position slides with the coarse depth (it read 4-5 m/s 20-25 m
+        // ahead), and a crossing one's flank fools it.
+        const bool moved = config_.static_interval <= 0.0 || tr.moved_hits >= config_.moving_frames;
         if (speed - margin >= config_.moving_speed && moved) {
           if (tr.state == VehicleMotion::Parked && config_.carve_time > 0) {
             // Fused while parked, gone now: its region is carved.

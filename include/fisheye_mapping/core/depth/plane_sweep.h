@@ -98,6 +98,15 @@ struct DepthFilterConfig {
   bool consistency = true;       // drop when < delta of the window is within gamma
   int consistency_window = 5;    // odd
   double gamma = 0.5;            // metres
+  // On the road (a pixel whose point lies within the ground planes' heights;
+  // needs the camera's mount) the tolerance grows with the range: max(gamma,
+  // road_gamma_relative * range). The road seen at a grazing angle changes
+  // its range by more than gamma from one pixel to the next beyond a few
+  // metres (0.7 m a row at 13 m), and the sweep's error grows with the range
+  // (its planes are uniform in inverse depth), so the far road failed the
+  // check wherever it was right. Elsewhere gamma alone (spurious depth on a
+  // smooth car body stays out). 0: the paper's fixed gamma everywhere.
+  double road_gamma_relative = 0.0;
   double delta = 0.3;
   // Infinity: drop pixels whose best cost is not below the cost at infinity
   // (each supporting view warped by its rotation alone) by at least
@@ -282,7 +291,15 @@ cv::Mat groundNearerThan(const std::vector<float>& rays, int w, int h, const Eig
 // below split_row; another size throws std::invalid_argument.
 cv::Mat applyDepthFilters(const DepthFilterConfig& config, const cv::Mat& raw, const cv::Mat& cost,
                           const cv::Mat& ratio, const cv::Mat& texture = cv::Mat(),
-                          const cv::Mat& infinity = cv::Mat(), const cv::Mat& below = cv::Mat());
+                          const cv::Mat& infinity = cv::Mat(), const cv::Mat& below = cv::Mat(),
+                          const cv::Mat& road = cv::Mat());
+
+// The pixels whose range (`range`, NaN invalid) puts their point on the road:
+// z_base within [z_min, z_max] (`rays` as belowHorizon's): CV_8UC1, 255
+// there. applyDepthFilters' `road` (road_gamma_relative). Throws
+// std::invalid_argument as belowHorizon.
+cv::Mat onTheRoad(const std::vector<float>& rays, const cv::Mat& range, const Eigen::Isometry3d& T_base_ref,
+                  double z_min, double z_max);
 
 // The pixels of `depth` (filtered range) that lie within band_px of a large
 // region without depth of which a tenth is seen to match at infinity (a best

@@ -22,8 +22,9 @@
 // A vehicle once seen moving stays moving. The static check (within
 // static_range) compares the body's depth with the camera's depth map of
 // static_interval earlier: a vehicle is called moving only when its body
-// moved (at most moving_share of its points agree; beyond static_range, or
-// in between, it stays undecided); one that has looked static (static_share
+// moved (at most moving_share of its points agree, in moving_frames measured
+// frame sets in a row; beyond static_range, or in between, it stays
+// undecided); one that has looked static (static_share
 // agree) in static_frames frame sets in a row is called parked whatever its
 // measured speed, only while its measured velocity runs along the ego's
 // heading: the near face of a parked car passed close by slides that way,
@@ -97,6 +98,11 @@ struct VehicleMotionConfig {
   /// where the check cannot measure (beyond static_range, no depth there)
   /// or reads in between, the vehicle stays undecided (masked).
   double moving_share = 0.25;
+  /// Frame sets in a row (of those the check measures) in which the body must
+  /// read moved before the vehicle is called moving: a vehicle once called
+  /// moving stays so, and one odd reading (a parked car's smooth body given
+  /// a wrong depth in one of the two depth maps) must not decide that.
+  int moving_frames = 2;
   double carve_time = 10.0;         ///< s a departed parked vehicle's region is carved; 0: never
   double carve_half_size = 3.0;     ///< m: half the side of that region (horizontal)
 };
@@ -162,6 +168,7 @@ class VehicleMotionTracker {
     double speed() const;
     std::deque<double> noise;  // each history position's expected scatter (m)
     int static_hits = 0;       // frame sets in a row it looked static (the static check)
+    int moved_hits = 0;        // measured frame sets in a row its body read moved (the static check)
     // The speed's standard error: the positions' scatter about the fitted
     // line (at least their expected scatter) over the root of the stamps' spread.
     double speedError() const;
