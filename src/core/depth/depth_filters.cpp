@@ -16,6 +16,22 @@ namespace fisheye_mapping {
 
 namespace {
 
+// A flat ray array (flatPixelRays) must hold 3 floats per pixel of a w x h image.
+void checkRays(const char* who, const std::vector<float>& rays, int w, int h) {
+  if (rays.size() != 3 * static_cast<size_t>(w) * h)
+    throw std::invalid_argument(std::string(who) + ": " + std::to_string(rays.size()) + " ray components for a " +
+                                std::to_string(w) + "x" + std::to_string(h) + " image");
+}
+
+// An optional mask of applyDepthFilters (empty, or CV_8UC1 of the depth's size).
+void checkMask(const char* what, const cv::Mat& mask, const cv::Mat& raw) {
+  if (!mask.empty() && (mask.size() != raw.size() || mask.type() != CV_8UC1))
+    throw std::invalid_argument(std::string("applyDepthFilters: the ") + what + " mask is " +
+                                std::to_string(mask.cols) + "x" + std::to_string(mask.rows) + ", the depth " +
+                                std::to_string(raw.cols) + "x" + std::to_string(raw.rows) +
+                                " (CV_8UC1 of the same size needed)");
+}
+
 // Immerkaer's (1996) noise operator N = [1 -2 1; -2 4 -2; 1 -2 1] at every
 // pixel whose 3x3 neighbourhood is valid: f(|N|, 3x3 mean). N has zero
 // response to planar intensity; on white noise of std s its response has
@@ -213,9 +229,7 @@ cv::Mat texturelessRegions(const cv::Mat& image, const cv::Mat& valid, double mi
 }
 
 cv::Mat belowHorizon(const std::vector<float>& rays, int w, int h, const Eigen::Isometry3d& T_base_ref) {
-  if (rays.size() != 3 * static_cast<size_t>(w) * h)
-    throw std::invalid_argument("belowHorizon: " + std::to_string(rays.size()) + " ray components for a " +
-                                std::to_string(w) + "x" + std::to_string(h) + " image");
+  checkRays("belowHorizon", rays, w, h);
   // The base frame's up direction in the camera frame: R^T e_z.
   const Eigen::Vector3f up = T_base_ref.linear().row(2).transpose().cast<float>();
   cv::Mat below(h, w, CV_8UC1);
@@ -237,9 +251,7 @@ std::vector<float> flatPixelRays(const CameraModel& camera) {
 
 cv::Mat groundNearerThan(const std::vector<float>& rays, int w, int h, const Eigen::Isometry3d& T_base_ref,
                          double height, double near) {
-  if (rays.size() != 3 * static_cast<size_t>(w) * h)
-    throw std::invalid_argument("groundNearerThan: " + std::to_string(rays.size()) + " ray components for a " +
-                                std::to_string(w) + "x" + std::to_string(h) + " image");
+  checkRays("groundNearerThan", rays, w, h);
   // Ray r meets z_base = height at range (height - t_z) / (up . r), up = R^T e_z.
   const Eigen::Vector3f up = T_base_ref.linear().row(2).transpose().cast<float>();
   const float drop = static_cast<float>(T_base_ref.translation().z() - height);  // camera above the plane
@@ -257,9 +269,7 @@ cv::Mat onTheRoad(const std::vector<float>& rays, const cv::Mat& range, const Ei
                   double z_min, double z_max) {
   const int w = range.cols, h = range.rows;
   if (range.type() != CV_32FC1) throw std::invalid_argument("onTheRoad: the range must be CV_32FC1");
-  if (rays.size() != 3 * static_cast<size_t>(w) * h)
-    throw std::invalid_argument("onTheRoad: " + std::to_string(rays.size()) + " ray components for a " +
-                                std::to_string(w) + "x" + std::to_string(h) + " image");
+  checkRays("onTheRoad", rays, w, h);
   // z_base of the point at range d along ray r: t_z + d (up . r).
   const Eigen::Vector3f up = T_base_ref.linear().row(2).transpose().cast<float>();
   const float tz = static_cast<float>(T_base_ref.translation().z());
@@ -281,14 +291,8 @@ cv::Mat onTheRoad(const std::vector<float>& rays, const cv::Mat& range, const Ei
 cv::Mat applyDepthFilters(const DepthFilterConfig& config, const cv::Mat& raw, const cv::Mat& cost,
                           const cv::Mat& ratio, const cv::Mat& texture, const cv::Mat& infinity,
                           const cv::Mat& below, const cv::Mat& road) {
-  if (!below.empty() && (below.size() != raw.size() || below.type() != CV_8UC1))
-    throw std::invalid_argument("applyDepthFilters: the below-horizon mask is " + std::to_string(below.cols) + "x" +
-                                std::to_string(below.rows) + ", the depth " + std::to_string(raw.cols) + "x" +
-                                std::to_string(raw.rows) + " (CV_8UC1 of the same size needed)");
-  if (!road.empty() && (road.size() != raw.size() || road.type() != CV_8UC1))
-    throw std::invalid_argument("applyDepthFilters: the road mask is " + std::to_string(road.cols) + "x" +
-                                std::to_string(road.rows) + ", the depth " + std::to_string(raw.cols) + "x" +
-                                std::to_string(raw.rows) + " (CV_8UC1 of the same size needed)");
+  checkMask("below-horizon", below, raw);
+  checkMask("road", road, raw);
   cv::Mat depth = raw.clone();
   const bool use_infinity = config.infinity && !infinity.empty();
   const float margin = static_cast<float>(config.infinity_margin);
